@@ -1,0 +1,338 @@
+"""The ``SOM`` module: an ensemble of E self-organising maps that train together.
+
+>>> import torch
+>>> from somtorch import SOM
+>>> x = torch.rand(500, 3, generator=torch.Generator().manual_seed(0))
+>>> som = SOM(4, 7, 3, ensemble=2, seed=0).fit(x, mode="batch", epochs=5, progress=False)
+>>> som.weight.shape, som.bmu(x).shape
+(torch.Size([2, 28, 3]), torch.Size([2, 500]))
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from ..validation import check_choice, check_positive, check_positive_int, check_tensor, resolve
+from . import checkpoint
+from .decay import DECAYS, DecayFn
+from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search, pairwise_sqdist
+from .grid import TOPOLOGIES, adjacency, grid_coordinates, grid_sqdist
+from .init import INITS, init_pca, init_random, init_sample
+from .losses import soft_assign, som_energy
+from .metrics import quantization_error, topographic_error, umatrix
+from .neighborhood import NEIGHBORHOODS, NeighborhoodFn
+from .training import Callback, Order, Schedules, run
+
+MODES = ("online", "batch", "minibatch")
+ORDERS = ("sequential", "random")
+DEFAULT_EPOCHS = {"online": 10, "batch": 20, "minibatch": 10}
+
+
+def _new_seed() -> int:
+    return int.from_bytes(os.urandom(4), "little")
+
+
+class SOM(nn.Module):
+    """An ensemble of ``E`` rectangular or hexagonal self-organising maps.
+
+    Args:
+        rows, cols: grid size; ``K = rows * cols`` neurons in row-major order.
+        dim: input dimension D.
+        ensemble: number of maps E trained together (each with its own seed and hyper-parameters).
+        topology: ``"rectangular"`` or ``"hexagonal"`` (offset rows).
+        toroidal: wrap the grid on a torus.
+        device, dtype: where and in which precision the weights live; inputs must match.
+        seed: base seed; member e uses ``seed + e``, so member e of an ensemble equals a solo map
+            built with ``seed=seed + e``. ``None`` draws a seed from the OS (kept in ``seeds``).
+        seeds: explicit per-member seeds (length E) instead of ``seed``.
+
+    Attributes:
+        weight: reference vectors ``(E, K, D)`` (an ``nn.Parameter``; assign a tensor to set it).
+        grid: neuron coordinates on the map ``(K, 2)``.
+        grid_d2: squared grid distances ``(K, K)``.
+        seeds: the members' seeds.
+        initialized: whether the weights were set from data, by assignment or by loading.
+    """
+
+    def __init__(self, rows: int, cols: int, dim: int, *, ensemble: int = 1, topology: str = "rectangular",
+                 toroidal: bool = False, device: str | torch.device | None = None,
+                 dtype: torch.dtype = torch.float32, seed: int | None = None,
+                 seeds: Sequence[int] | None = None) -> None:
+        super().__init__()
+        self.rows = check_positive_int("rows", rows)
+        self.cols = check_positive_int("cols", cols)
+        self.dim = check_positive_int("dim", dim)
+        self.ensemble = check_positive_int("ensemble", ensemble)
+        self.topology = check_choice("topology", topology, TOPOLOGIES)
+        if not isinstance(toroidal, bool):
+            raise TypeError(f"toroidal must be a bool; got {type(toroidal).__name__}")
+        self.toroidal = toroidal
+        if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
+            raise TypeError(f"dtype must be a floating-point torch.dtype; got {dtype!r}")
+        device = torch.device(device) if device is not None else torch.device("cpu")
+        if seeds is not None:
+            if seed is not None:
+                raise ValueError("give either seed or seeds, not both")
+            seeds = [int(s) for s in seeds]
+            if len(seeds) != self.ensemble:
+                raise ValueError(f"seeds must have one entry per member ({self.ensemble}); got {len(seeds)}")
+        else:
+            if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
+                raise TypeError(f"seed must be an int or None; got {type(seed).__name__}")
+            base = _new_seed() if seed is None else seed
+            seeds = [base + e for e in range(self.ensemble)]
+        self.seeds: list[int] = seeds
+        self._generators = [torch.Generator(device=device).manual_seed(s) for s in seeds]
+        k = self.rows * self.cols
+        self.weight = nn.Parameter(torch.zeros(self.ensemble, k, self.dim, device=device, dtype=dtype))
+        self.register_buffer("grid", grid_coordinates(self.rows, self.cols, topology, dtype=dtype,
+                                                      device=device), persistent=False)
+        d2 = grid_sqdist(self.rows, self.cols, topology, toroidal, dtype=dtype, device=device)
+        self.register_buffer("grid_d2", d2, persistent=False)
+        self.register_buffer("adjacency", adjacency(d2, topology), persistent=False)
+        self.initialized = False
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def num_neurons(self) -> int:
+        """K = rows · cols."""
+        return self.rows * self.cols
+
+    @property
+    def device(self) -> torch.device:
+        return self.weight.device
+
+    @property
+    def dtype(self) -> torch.dtype:
+        return self.weight.dtype
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "weight" and "weight" in self.__dict__.get("_parameters", {}) \
+                and not isinstance(value, nn.Parameter):
+            self.set_weight(value)
+            return
+        super().__setattr__(name, value)
+
+    def set_weight(self, value: torch.Tensor) -> SOM:
+        """Set the reference vectors; ``(K, D)`` is broadcast to every member, ``(E, K, D)`` is per member."""
+        shape = (self.ensemble, self.num_neurons, self.dim)
+        check_tensor("weight", value, ndim=(2, 3), floating=True, finite=True)
+        if tuple(value.shape[-2:]) != shape[1:] or (value.ndim == 3 and value.shape[0] != self.ensemble):
+            raise ValueError(f"weight must have shape {shape} (or {shape[1:]}); got {tuple(value.shape)}")
+        with torch.no_grad():
+            self.weight.copy_(value.to(self.weight).expand(shape))
+        self.initialized = True
+        return self
+
+    def config(self) -> dict[str, Any]:
+        """Hyper-parameters that rebuild this map (saved with every checkpoint)."""
+        return {"rows": self.rows, "cols": self.cols, "dim": self.dim, "ensemble": self.ensemble,
+                "topology": self.topology, "toroidal": self.toroidal, "seeds": list(self.seeds),
+                "dtype": str(self.dtype).removeprefix("torch.")}
+
+    def extra_repr(self) -> str:
+        return (f"rows={self.rows}, cols={self.cols}, dim={self.dim}, ensemble={self.ensemble}, "
+                f"topology={self.topology!r}, toroidal={self.toroidal}")
+
+    def member(self, e: int) -> SOM:
+        """A solo map holding a copy of member ``e`` (with that member's seed)."""
+        if not 0 <= e < self.ensemble:
+            raise IndexError(f"member {e} out of range for an ensemble of {self.ensemble}")
+        solo = SOM(self.rows, self.cols, self.dim, topology=self.topology, toroidal=self.toroidal,
+                   device=self.device, dtype=self.dtype, seeds=[self.seeds[e]])
+        solo.set_weight(self.weight.detach()[e])
+        solo.initialized = self.initialized
+        return solo
+
+    # ------------------------------------------------------------------ input checks
+    def _check_x(self, x: Any, name: str = "x") -> torch.Tensor:
+        check_tensor(name, x, ndim=(2, 3), last_dim=self.dim, floating=True, finite=True)
+        if x.ndim == 3 and x.shape[0] != self.ensemble:
+            raise ValueError(f"{name} of shape {tuple(x.shape)} must have the ensemble size "
+                             f"{self.ensemble} as first dimension (or be (N, D), shared by all members)")
+        if x.shape[-2] == 0:
+            raise ValueError(f"{name} has zero rows; at least one sample is needed")
+        if x.dtype != self.dtype:
+            raise TypeError(f"{name} has dtype {x.dtype} but the SOM uses {self.dtype}; "
+                            f"convert with x.to({self.dtype})")
+        if x.device != self.device:
+            raise ValueError(f"{name} is on {x.device} but the SOM is on {self.device}; move one of them")
+        return x
+
+    def _per_member(self, name: str, value: Any) -> torch.Tensor:
+        if isinstance(value, torch.Tensor):
+            if value.ndim == 0:
+                value = value.reshape(1)
+            if value.ndim != 1 or value.shape[0] not in (1, self.ensemble):
+                raise ValueError(f"{name} must be a scalar or a tensor of shape [{self.ensemble}] "
+                                 f"(one value per member); got shape {tuple(value.shape)}")
+        check_positive(name, value)
+        t = torch.as_tensor(value, dtype=self.dtype, device=self.device).reshape(-1)
+        return t.expand(self.ensemble).clone()
+
+    def _per_member_fn(self, name: str, value: Any, registry: dict) -> list:
+        if isinstance(value, (list, tuple)):
+            if len(value) != self.ensemble:
+                raise ValueError(f"{name} as a sequence needs one entry per member ({self.ensemble}); "
+                                 f"got {len(value)}")
+            return [resolve(name, v, registry) for v in value]
+        return [resolve(name, value, registry)] * self.ensemble
+
+    # ------------------------------------------------------------------ initialisation
+    @torch.no_grad()
+    def initialize(self, x: torch.Tensor, method: str = "random") -> SOM:
+        """Initialise the weights from data: ``"random"``, ``"sample"`` or ``"pca"`` (see ``init``)."""
+        x = self._check_x(x)
+        check_choice("method", method, INITS)
+        members = []
+        for e in range(self.ensemble):
+            xe = x if x.ndim == 2 else x[e]
+            if method == "pca":
+                if self.dim < 2:
+                    raise ValueError("method='pca' needs at least 2 features; got dim=1")
+                members.append(init_pca(xe, self.rows, self.cols))
+            elif method == "sample":
+                members.append(init_sample(xe, self.num_neurons, self._generators[e]))
+            else:
+                members.append(init_random(xe, self.num_neurons, self._generators[e]))
+        return self.set_weight(torch.stack(members))
+
+    # ------------------------------------------------------------------ training
+    def fit(self, x: torch.Tensor, *, mode: str = "online", epochs: int | None = None,
+            iterations: int | None = None, lr: float | torch.Tensor = 0.5,
+            sigma: float | torch.Tensor | None = None, lr_final: float | torch.Tensor | None = None,
+            sigma_final: float | torch.Tensor | None = None,
+            lr_decay: str | DecayFn | Sequence[str] = "asymptotic",
+            sigma_decay: str | DecayFn | Sequence[str] = "asymptotic",
+            neighborhood: str | NeighborhoodFn = "gaussian",
+            order: str | torch.Tensor = "random", batch_size: int = 256, init: str = "random",
+            progress: bool = True, callback: Callback | None = None,
+            callback_every: int | None = None) -> SOM:
+        """Train the maps on ``x`` and return ``self``.
+
+        Args:
+            x: samples ``(N, D)`` shared by all members, or ``(E, N, D)``.
+            mode: ``"online"`` (Kohonen's sequential rule, one sample per step), ``"batch"`` (batch
+                map, one step per epoch) or ``"minibatch"`` (batch-map updates on ``batch_size``
+                samples with learning rate ``lr``).
+            epochs: passes over the data (default 10 online / 20 batch / 10 minibatch).
+            iterations: online only: number of single-sample steps (overrides ``epochs``).
+            lr, sigma: initial learning rate and neighbourhood radius (grid units, default
+                max(rows, cols)/2); scalars or per-member tensors ``(E,)``. ``lr`` is unused in batch mode.
+            lr_final, sigma_final: end values for the linear / exponential / inverse-time decays
+                (default lr/100 and min(sigma, 0.5)); scalar or ``(E,)``.
+            lr_decay, sigma_decay: a name from ``somtorch.core.decay.DECAYS``, a callable, or one
+                name per member.
+            neighborhood: a name from ``somtorch.core.neighborhood.NEIGHBORHOODS`` or a callable.
+            order: ``"sequential"``, ``"random"`` (a fresh permutation per epoch and member) or an
+                explicit index tensor ``(T,)`` or ``(E, T)`` (online: T = iterations; minibatch:
+                T = steps · batch_size).
+            batch_size: mini-batch size.
+            init: initialisation used if the weights were not initialised yet.
+            progress: show a progress bar (only appears for runs longer than half a second).
+            callback: called with a :class:`~somtorch.core.training.StepInfo` every ``callback_every``
+                steps (default: once per epoch) and at the end.
+        """
+        x = self._check_x(x)
+        check_choice("mode", mode, MODES)
+        n = x.shape[-2]
+        if sigma is None:
+            sigma = max(self.rows, self.cols) / 2.0
+        sigma_t = self._per_member("sigma", sigma)
+        lr_t = self._per_member("lr", lr)
+        lr_end = self._per_member("lr_final", lr_final) if lr_final is not None else lr_t / 100.0
+        sig_end = (self._per_member("sigma_final", sigma_final) if sigma_final is not None
+                   else torch.clamp(sigma_t, max=0.5))
+        sched = Schedules(lr_t, lr_end, self._per_member_fn("lr_decay", lr_decay, DECAYS),
+                          sigma_t, sig_end, self._per_member_fn("sigma_decay", sigma_decay, DECAYS))
+        nb = resolve("neighborhood", neighborhood, NEIGHBORHOODS)
+        batch_size = check_positive_int("batch_size", batch_size)
+        if iterations is not None and mode != "online":
+            raise ValueError(f"iterations is only for mode='online'; use epochs for mode={mode!r}")
+        epochs = check_positive_int("epochs", epochs if epochs is not None else DEFAULT_EPOCHS[mode])
+        if mode == "online":
+            steps = check_positive_int("iterations", iterations) if iterations is not None else epochs * n
+            stream = steps
+        elif mode == "batch":
+            steps, stream = epochs, 0
+        else:
+            steps = max(1, epochs * n // batch_size)
+            stream = steps * batch_size
+        if isinstance(order, torch.Tensor):
+            if mode == "batch":
+                raise ValueError("an explicit order has no meaning in mode='batch' (every step uses all samples)")
+            check_tensor("order", order, ndim=(1, 2))
+            if order.dtype not in (torch.int64, torch.int32):
+                raise TypeError(f"order must be an integer index tensor; got dtype {order.dtype}")
+            if order.shape[-1] != stream or (order.ndim == 2 and order.shape[0] != self.ensemble):
+                raise ValueError(f"order must have shape ({stream},) or ({self.ensemble}, {stream}) for "
+                                 f"mode={mode!r} with these settings; got {tuple(order.shape)}")
+            if int(order.min()) < 0 or int(order.max()) >= n:
+                raise ValueError(f"order holds indices outside [0, {n}); got min {int(order.min())}, "
+                                 f"max {int(order.max())}")
+            stream_order = Order("explicit", n, self.ensemble, self._generators, self.device,
+                                 explicit=order.to(self.device, torch.long))
+        else:
+            check_choice("order", order, ORDERS)
+            stream_order = Order(order, n, self.ensemble, self._generators, self.device)
+        check_choice("init", init, INITS)
+        if callback_every is not None:
+            check_positive_int("callback_every", callback_every)
+        if callback is not None and not callable(callback):
+            raise TypeError(f"callback must be callable; got {type(callback).__name__}")
+        # ---- all checks done: work starts here
+        if not self.initialized:
+            self.initialize(x, init)
+        run(self.weight.data, x, mode=mode, steps=steps, batch_size=batch_size, order=stream_order,
+            sched=sched, grid_d2=self.grid_d2, neighborhood=nb, progress=progress, callback=callback,
+            callback_every=callback_every, desc=f"SOM {mode}")
+        return self
+
+    # ------------------------------------------------------------------ inference and metrics
+    def bmu(self, x: torch.Tensor, *, chunk_elements: int = DEFAULT_CHUNK_ELEMENTS) -> torch.Tensor:
+        """Best-matching unit of every sample, per member. ``(N, D)``/``(E, N, D)`` → ``(E, N)`` long."""
+        return bmu_search(self._check_x(x), self.weight.detach(), chunk_elements=chunk_elements)
+
+    def quantization_error(self, x: torch.Tensor) -> torch.Tensor:
+        """Mean distance of the samples to their BMU, per member ``(E,)``."""
+        return quantization_error(self._check_x(x), self.weight.detach())
+
+    def topographic_error(self, x: torch.Tensor) -> torch.Tensor:
+        """Share of samples whose two best units are not adjacent, per member ``(E,)``."""
+        return topographic_error(self._check_x(x), self.weight.detach(), self.adjacency)
+
+    def umatrix(self) -> torch.Tensor:
+        """Mean distance of each neuron to its grid neighbours ``(E, rows, cols)``."""
+        return umatrix(self.weight.detach(), self.adjacency, self.rows, self.cols)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Squared distances of every sample to every neuron (differentiable) ``(E, N, K)``."""
+        return pairwise_sqdist(self._check_x(x), self.weight)
+
+    def soft_assign(self, x: torch.Tensor, temperature: float | torch.Tensor = 1.0) -> torch.Tensor:
+        """Differentiable soft BMU weights ``softmax(−‖x − w‖²/τ)`` ``(E, N, K)``."""
+        check_positive("temperature", temperature)
+        return soft_assign(self._check_x(x), self.weight, temperature)
+
+    def loss(self, x: torch.Tensor, sigma: float | torch.Tensor = 1.0,
+             neighborhood: str | NeighborhoodFn = "gaussian") -> torch.Tensor:
+        """SOM energy per member ``(E,)`` (see :func:`somtorch.core.losses.som_energy`)."""
+        check_positive("sigma", sigma)
+        nb = resolve("neighborhood", neighborhood, NEIGHBORHOODS)
+        return som_energy(self._check_x(x), self.weight, self.grid_d2, torch.as_tensor(sigma), nb)
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the weights (safetensors) and hyper-parameters (``<path>.json``) atomically."""
+        return checkpoint.save(self, path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, *, device: str | torch.device | None = None) -> SOM:
+        """Rebuild a map saved with :meth:`save`."""
+        return checkpoint.load(cls, path, device=device)
