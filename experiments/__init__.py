@@ -1,0 +1,1 @@
+"""Hydra entry points of somtorch (thin: compose → build → run → write)."""

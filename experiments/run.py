@@ -1,0 +1,133 @@
+"""``python -m experiments.run`` / ``somtorch-run``: the whole pipeline on one scene.
+
+Compose the config (conf/run.yaml), load the scene, run steps 1a–1d, write into the Hydra run
+directory: PNG maps, the reduced map (NPZ), PLY point clouds and a PNG view, the SOM checkpoint,
+TensorBoard events and ``metrics.json`` (written last, atomically: its presence marks a complete run).
+
+Examples::
+
+    python -m experiments.run                                   # embedded Motorcycle scene
+    python -m experiments.run data=kitti2015 ensemble=20         # a shared scene, 20 seeds at once
+    python -m experiments.run data.source=/path/disp.pfm objects=paper
+    python -m experiments.run data=stereo_pair data.left=l.png data.right=r.png
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.utils import to_absolute_path
+from omegaconf import DictConfig, OmegaConf
+
+from experiments.schema import RunConfig, register
+
+log = logging.getLogger("somtorch.run")
+register()
+
+
+def load_input(cfg: RunConfig):
+    """The scene named by ``cfg.data`` (every check on the files happens here, before any work)."""
+    from somtorch.disparity.io import read_image
+    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity.stereo import SGBMParams, scene_from_stereo
+
+    d = cfg.data
+    if d.left is not None or d.right is not None:
+        if d.left is None or d.right is None:
+            raise ValueError("data.left and data.right must both be set for a stereo pair")
+        left, right = read_image(to_absolute_path(d.left)), read_image(to_absolute_path(d.right))
+        return scene_from_stereo(left, right, SGBMParams.from_dict(dict(d.sgbm)),
+                                 name=d.name or Path(d.left).stem)
+    if d.source is None:
+        raise ValueError("data.source is empty: give 'motorcycle', a scene folder or a disparity file")
+    spec = d.source if d.source == "motorcycle" else to_absolute_path(d.source)
+    disp = to_absolute_path(d.disparity_file) if d.disparity_file else None
+    return load_scene(spec, disparity_file=disp)
+
+
+def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> dict:
+    """Run the pipeline described by ``cfg`` and write every output into ``out_dir``."""
+    import torch
+
+    from somtorch.atomic import write_json
+    from somtorch.outputs import summarize, write_maps, write_point_clouds
+    from somtorch.pipeline import PipelineConfig, run_pipeline
+
+    t_start = time.perf_counter()
+    scene = load_input(cfg)
+    if cfg.object_id is not None and scene.objects is None:
+        raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
+    if not 0 <= cfg.output.member < cfg.ensemble:
+        raise ValueError(f"output.member={cfg.output.member} must be in [0, ensemble={cfg.ensemble})")
+    pcfg = PipelineConfig(features=cfg.features, som=cfg.som, train=cfg.train, objects=cfg.objects,
+                          reduction=cfg.reduction, ensemble=cfg.ensemble, seed=cfg.seed,
+                          object_id=cfg.object_id)
+    writer = None
+    if cfg.output.tensorboard:
+        from torch.utils.tensorboard import SummaryWriter
+        writer = SummaryWriter(str(out_dir / "tb"))
+    try:
+        result = run_pipeline(scene, pcfg, progress=False, log_training=writer.add_scalar if writer else None)
+        metrics = summarize(scene, result, config_dict)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        if cfg.output.maps:
+            pics = write_maps(scene, result, out_dir, member=cfg.output.member)
+            if writer is not None:
+                for name, img in pics.items():
+                    writer.add_image(f"maps/{name}", torch.from_numpy(img).permute(2, 0, 1), 0)
+        if cfg.output.pointcloud:
+            metrics["pointcloud"] = write_point_clouds(
+                scene, result, out_dir, member=cfg.output.member, voxel_size=cfg.output.voxel_size,
+                render=cfg.output.render, render_backend=cfg.output.render_backend)
+        if cfg.output.checkpoint:
+            result.som.save(out_dir / "som.safetensors")
+        if writer is not None:
+            _log_hparams(writer, cfg, metrics)
+    finally:
+        if writer is not None:
+            writer.close()
+    metrics["timings_s"]["total"] = time.perf_counter() - t_start
+    write_json(out_dir / "metrics.json", metrics)
+    s = metrics.get("summary")
+    log.info("scene %s: %d valid px, %d train px, timings %s", scene.name, scene.n_valid,
+             metrics["pixels"]["train"], {k: round(v, 4) for k, v in metrics["timings_s"].items()})
+    m0 = metrics["members"][cfg.output.member]
+    log.info("member %d: %d areas, kept %d, reduction %.1f %% (union), %.1f %% (crops)", cfg.output.member,
+             m0["n_areas"], len(m0["kept_areas"]), m0["reduction_union"], m0["reduction_crops"])
+    if s:
+        log.info("object: identified_100 %d/%d, identified_95 %d/%d, useful hits %d, x_opt %.1f %%",
+                 s["identified_100"], s["runs"], s["identified_95"], s["runs"], s["useful_hits"], s["x_opt"])
+    log.info("outputs in %s", out_dir)
+    return metrics
+
+
+def _log_hparams(writer, cfg: RunConfig, metrics: dict) -> None:
+    hp = {"rows": cfg.som.rows, "cols": cfg.som.cols, "mode": cfg.train.mode, "epochs": cfg.train.epochs,
+          "lr": cfg.train.lr, "sigma": cfg.train.sigma if cfg.train.sigma is not None else -1.0,
+          "d_weight": cfg.features.d_weight, "train_stride": cfg.features.train_stride,
+          "select": cfg.objects.select, "similarity": cfg.objects.similarity,
+          "tolerance_frac": cfg.reduction.tolerance_frac, "ensemble": cfg.ensemble, "seed": cfg.seed}
+    m0 = metrics["members"][cfg.output.member]
+    res = {"hparam/reduction_union": m0["reduction_union"],
+           "hparam/quantization_error": m0["quantization_error"] or float("nan")}
+    if metrics.get("summary"):
+        s = metrics["summary"]
+        res["hparam/identified_95_rate"] = s["identified_95"] / s["runs"]
+        res["hparam/useful_hit_rate"] = s["useful_hits"] / s["runs"]
+    writer.add_hparams(hp, res, run_name=".")
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="run")
+def main(dcfg: DictConfig) -> dict:
+    """Hydra entry point."""
+    cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
+
+
+if __name__ == "__main__":
+    main()

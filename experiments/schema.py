@@ -1,0 +1,61 @@
+"""Typed schemas of the Hydra configs: a typo or a wrong type fails before any work starts.
+
+The pipeline's own dataclasses (``somtorch.pipeline``) are the schema of their groups, so the
+library and the configs cannot drift apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from hydra.core.config_store import ConfigStore
+
+from somtorch.outputs import OutputConfig
+from somtorch.pipeline import FeatureConfig, ReductionConfig, SOMConfig, TrainConfig
+from somtorch.tasks.objects import AreaConfig
+
+
+@dataclass
+class DataConfig:
+    """Where the disparity comes from.
+
+    ``source``: ``"motorcycle"`` (the embedded Middlebury scene of scikit-image), a scene folder
+    (every layout of ../shared/data) or a disparity file (PFM, 16-bit PNG, NPY, NPZ). With ``left``
+    and ``right`` set instead, the disparity is computed with OpenCV StereoSGBM (``sgbm``).
+    """
+
+    source: Optional[str] = "motorcycle"
+    disparity_file: Optional[str] = None
+    left: Optional[str] = None
+    right: Optional[str] = None
+    sgbm: dict[str, Any] = field(default_factory=dict)
+    name: Optional[str] = None
+
+
+@dataclass
+class PathsConfig:
+    data_dir: str = "../shared/data"
+    output_dir: str = "outputs"
+
+
+@dataclass
+class RunConfig:
+    data: DataConfig = field(default_factory=DataConfig)
+    features: FeatureConfig = field(default_factory=FeatureConfig)
+    som: SOMConfig = field(default_factory=SOMConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    objects: AreaConfig = field(default_factory=AreaConfig)
+    reduction: ReductionConfig = field(default_factory=ReductionConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+    paths: PathsConfig = field(default_factory=PathsConfig)
+    ensemble: int = 1
+    seed: int = 0
+    object_id: Optional[int] = None
+    log_every_epoch: bool = True
+
+
+def register() -> None:
+    """Register the schemas in Hydra's ConfigStore (idempotent)."""
+    cs = ConfigStore.instance()
+    cs.store(name="run_schema", node=RunConfig)

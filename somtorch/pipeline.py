@@ -1,0 +1,184 @@
+"""The paper's pipeline (Fig. 6) as one function: features → SOM → segments → object areas → reduction.
+
+``run_pipeline(scene, PipelineConfig())`` trains ``ensemble`` maps at once (one per seed) and
+returns, per member, the label map, all object areas, the kept ones, the reduced map and, when the
+scene has an object mask, the score. Point clouds and files are produced by the callers
+(``experiments/run.py``), so this module stays free of I/O.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from collections.abc import Callable
+from typing import Any
+
+import torch
+
+from .core import SOM, StepInfo
+from .disparity.features import Features, make_features
+from .disparity.scene import Scene
+from .tasks.objects import AreaConfig, NeuronStats, ObjectArea, find_object_areas, neuron_stats, select_areas
+from .tasks.reduction import Reduction, reduce_map
+from .tasks.scoring import Score, score_reduction
+from .tasks.segmentation import segment
+from .validation import check_positive_int
+
+
+@dataclass
+class FeatureConfig:
+    """Input data set (paper step 1a); see :mod:`somtorch.disparity.features`.
+
+    ``train_stride`` 1 = NOR (train on every valid pixel), 10 = OR (the paper's runtime-optimised
+    mode); the full map is always segmented.
+    """
+
+    normalize: str = "image"
+    d_weight: float = 1.0
+    train_stride: int = 10
+
+
+@dataclass
+class SOMConfig:
+    rows: int = 4
+    cols: int = 7
+    topology: str = "rectangular"
+    toroidal: bool = False
+    init: str = "random"
+
+
+@dataclass
+class TrainConfig:
+    """SOM training (paper step 1 b); arguments of :meth:`somtorch.SOM.fit`."""
+
+    mode: str = "online"
+    epochs: int = 10
+    lr: float = 0.5
+    sigma: float | None = None
+    lr_decay: str = "asymptotic"
+    sigma_decay: str = "asymptotic"
+    neighborhood: str = "gaussian"
+    order: str = "random"
+    batch_size: int = 256
+
+
+@dataclass
+class ReductionConfig:
+    tolerance_px: float = 0.0
+    tolerance_frac: float = 0.05
+
+
+@dataclass
+class PipelineConfig:
+    features: FeatureConfig = field(default_factory=FeatureConfig)
+    som: SOMConfig = field(default_factory=SOMConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    objects: AreaConfig = field(default_factory=AreaConfig)
+    reduction: ReductionConfig = field(default_factory=ReductionConfig)
+    ensemble: int = 1
+    seed: int = 0
+    object_id: int | None = None  # scored object; None = the scene's main object(s)
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class MemberResult:
+    """Results of one ensemble member."""
+
+    seed: int
+    areas: list[ObjectArea]
+    kept: list[ObjectArea]
+    reduction: Reduction
+    score: Score | None
+    stats: NeuronStats
+
+
+@dataclass
+class PipelineResult:
+    features: Features
+    train_features: Features
+    som: SOM
+    labels: torch.Tensor  # (E, H, W)
+    ref_disparity: torch.Tensor  # (E, K) px
+    members: list[MemberResult]
+    timings: dict[str, float]
+    quantization_error: torch.Tensor
+    topographic_error: torch.Tensor
+
+
+def _tic() -> float:
+    return time.perf_counter()
+
+
+def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: bool = False,
+                 metrics: bool = True,
+                 log_training: Callable[[str, float, int], Any] | None = None) -> PipelineResult:
+    """Run steps 1a–1d on ``scene`` (see the module docstring). Timings are in seconds per stage.
+
+    Args:
+        progress: show a progress bar while training.
+        metrics: compute quantization and topographic error of the trained maps.
+        log_training: called as ``log_training(tag, value, epoch)`` once per epoch with the mean
+            quantization / topographic error of the members (e.g. ``SummaryWriter.add_scalar``);
+            its cost is not part of the ``train`` timing only approximately (it runs inside ``fit``).
+    """
+    cfg = cfg or PipelineConfig()
+    check_positive_int("ensemble", cfg.ensemble)
+    t: dict[str, float] = {}
+    t0 = _tic()
+    feats = make_features(scene.disparity, scene.valid, normalize=cfg.features.normalize,
+                          d_weight=cfg.features.d_weight)
+    train = feats.subsample(cfg.features.train_stride)
+    if len(train) == 0:
+        raise ValueError(f"features.train_stride={cfg.features.train_stride} leaves no valid pixel of "
+                         f"scene {scene.name!r} to train on; use a smaller stride")
+    t["features"] = _tic() - t0
+
+    t0 = _tic()
+    s = cfg.som
+    som = SOM(s.rows, s.cols, 3, ensemble=cfg.ensemble, topology=s.topology, toroidal=s.toroidal, seed=cfg.seed)
+    tc = cfg.train
+    callback = None
+    if log_training is not None:
+        def callback(info: StepInfo) -> None:
+            log_training("train/quantization_error", float(som.quantization_error(train.x).mean()),
+                         round(info.epoch))
+            log_training("train/topographic_error", float(som.topographic_error(train.x).mean()),
+                         round(info.epoch))
+            log_training("train/sigma", float(info.sigma.mean()), round(info.epoch))
+    som.fit(train.x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
+            sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, order=tc.order,
+            batch_size=tc.batch_size, init=s.init, progress=progress, callback=callback)
+    t["train"] = _tic() - t0
+
+    t0 = _tic()
+    weight = som.weight.detach()
+    labels = segment(weight, feats.x, feats.pixels, feats.shape)
+    t["segment"] = _tic() - t0
+
+    ref_d = feats.to_pixel_units(weight)[..., 2]  # (E, K)
+    obj_mask = None
+    if scene.objects is not None:
+        obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
+    members, t_obj, t_red = [], 0.0, 0.0
+    for e in range(cfg.ensemble):
+        t0 = _tic()
+        stats = neuron_stats(labels[e], scene.disparity, som.num_neurons)
+        areas = find_object_areas(ref_d[e], som.grid_d2, stats, cfg.objects)
+        kept = select_areas(areas, stats, cfg.objects)
+        t1 = _tic()
+        red = reduce_map([a.box for a in kept], scene.valid, tolerance_px=cfg.reduction.tolerance_px,
+                         tolerance_frac=cfg.reduction.tolerance_frac)
+        t_red += _tic() - t1
+        t_obj += t1 - t0
+        score = score_reduction(red, obj_mask, scene.valid) if obj_mask is not None else None
+        members.append(MemberResult(som.seeds[e], areas, kept, red, score, stats))
+    t["objects"] = t_obj
+    t["reduction"] = t_red
+    if metrics:
+        qe, te = som.quantization_error(train.x), som.topographic_error(train.x)
+    else:
+        qe = te = torch.full((cfg.ensemble,), float("nan"))
+    return PipelineResult(feats, train, som, labels, ref_d, members, t, qe, te)

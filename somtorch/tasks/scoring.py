@@ -1,0 +1,62 @@
+"""Scoring a reduction against a ground-truth object mask (the paper's Tables 1 and 2).
+
+* identified fraction: share of the object's pixels *with a valid disparity* that lie inside the
+  kept area (pixels without disparity are not in the data set, so no method can be scored on them);
+* identified_100 / identified_95: fraction ≥ 1.0 / ≥ 0.95;
+* x_opt: the reduction obtained by keeping exactly the object's bounding box;
+* useful hit: ≥ 95 % identified AND reduction ≥ 0.75 · x_opt (a hit that also reduces the data).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+
+from ..validation import check_tensor
+from .reduction import Reduction, reduce_map
+
+
+@dataclass
+class Score:
+    identified_fraction: float
+    identified_100: bool
+    identified_95: bool
+    reduction_union: float
+    reduction_crops: float
+    x_opt: float
+    useful_hit: bool
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def object_box(mask: torch.Tensor) -> tuple[int, int, int, int]:
+    """Bounding box (x0, y0, x1, y1), inclusive, of a non-empty bool mask ``(H, W)``."""
+    ys, xs = mask.nonzero(as_tuple=True)
+    if ys.numel() == 0:
+        raise ValueError("the object mask is empty: no bounding box")
+    return int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())
+
+
+def optimal_reduction(object_mask: torch.Tensor, valid: torch.Tensor) -> float:
+    """x_opt: the reduction in % when exactly the object's bounding box is kept."""
+    return reduce_map([object_box(object_mask)], valid, tolerance_frac=0.0).reduction_union
+
+
+def score_reduction(reduction: Reduction, object_mask: torch.Tensor, valid: torch.Tensor,
+                    *, useful_factor: float = 0.75) -> Score:
+    """Score one reduced map against an object mask ``(H, W)`` bool."""
+    check_tensor("object_mask", object_mask, ndim=2, dtype=torch.bool)
+    if object_mask.shape != valid.shape or reduction.mask.shape != valid.shape:
+        raise ValueError(f"object_mask {tuple(object_mask.shape)}, valid {tuple(valid.shape)} and the "
+                         f"reduction mask {tuple(reduction.mask.shape)} must have the same shape")
+    obj = object_mask & valid
+    n_obj = int(obj.sum())
+    if n_obj == 0:
+        raise ValueError("the object has no pixel with a valid disparity: it cannot be scored")
+    frac = int((obj & reduction.mask).sum()) / n_obj
+    x_opt = optimal_reduction(object_mask, valid)
+    red = reduction.reduction_union
+    return Score(frac, frac >= 1.0, frac >= 0.95, red, reduction.reduction_crops, x_opt,
+                 frac >= 0.95 and red >= useful_factor * x_opt)

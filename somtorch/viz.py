@@ -1,0 +1,121 @@
+"""Pictures of the pipeline: disparity maps, segment maps, reference vectors (Fig. 10), object areas.
+
+All functions return ``uint8`` RGB arrays ``(H, W, 3)`` (so they also feed TensorBoard) and
+:func:`save_png` writes them atomically. matplotlib is used with the Agg backend only.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from .atomic import atomic_path
+
+
+def save_png(image: np.ndarray, path: str | os.PathLike) -> Path:
+    """Write an RGB ``(H, W, 3)`` or grey ``(H, W)`` uint8 image as PNG, atomically."""
+    arr = np.ascontiguousarray(image)
+    if arr.dtype != np.uint8:
+        raise TypeError(f"image must be uint8; got {arr.dtype}")
+    if arr.ndim == 3:
+        arr = cv2.cvtColor(arr, cv2.COLOR_RGB2BGR)
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), arr):
+            raise OSError(f"OpenCV could not write {path}")
+    return Path(path)
+
+
+def colorize(values: torch.Tensor, valid: torch.Tensor | None = None, *, lo: float | None = None,
+             hi: float | None = None, cmap: int = cv2.COLORMAP_TURBO) -> np.ndarray:
+    """Colour-map a float map ``(H, W)`` (NaN / invalid → black). Returns ``(H, W, 3)`` uint8 RGB."""
+    v = values.detach().double().cpu().numpy()
+    ok = np.isfinite(v) if valid is None else (valid.cpu().numpy() & np.isfinite(v))
+    if not ok.any():
+        return np.zeros((*v.shape, 3), np.uint8)
+    lo = float(v[ok].min()) if lo is None else lo
+    hi = float(v[ok].max()) if hi is None else hi
+    g = np.clip((np.where(ok, v, lo) - lo) / max(hi - lo, 1e-12), 0, 1)
+    rgb = cv2.cvtColor(cv2.applyColorMap((g * 255).astype(np.uint8), cmap), cv2.COLOR_BGR2RGB)
+    rgb[~ok] = 0
+    return rgb
+
+
+def grey(values: torch.Tensor, valid: torch.Tensor | None = None, *, lo: float | None = None,
+         hi: float | None = None) -> np.ndarray:
+    """Grey rendering of a float map (near = bright), invalid black. ``(H, W)`` → ``(H, W, 3)`` uint8."""
+    v = values.detach().double().cpu().numpy()
+    ok = np.isfinite(v) if valid is None else (valid.cpu().numpy() & np.isfinite(v))
+    if not ok.any():
+        return np.zeros((*v.shape, 3), np.uint8)
+    lo = float(v[ok].min()) if lo is None else lo
+    hi = float(v[ok].max()) if hi is None else hi
+    g = (np.clip((np.where(ok, v, lo) - lo) / max(hi - lo, 1e-12), 0, 1) * 215 + 40).astype(np.uint8)
+    g[~ok] = 0
+    return np.repeat(g[..., None], 3, axis=2)
+
+
+def draw_reference_vectors(background: np.ndarray, ref_px: torch.Tensor, grid_d2: torch.Tensor) -> np.ndarray:
+    """Fig. 10: the neurons drawn as dots at their (x, y), grid neighbours joined by lines.
+
+    Shape:
+        ``background`` ``(H, W, 3)`` uint8, ``ref_px`` ``(K, 3)`` (y, x, d) px, ``grid_d2`` ``(K, K)``.
+    """
+    img = background.copy()
+    pts = ref_px[:, :2].detach().cpu().numpy()
+    d = ref_px[:, 2].detach().cpu().numpy()
+    k = len(pts)
+    adj = ((grid_d2 <= 1.0 + 1e-6) & (grid_d2 > 0)).cpu().numpy()
+    scale = max(1, round(max(img.shape[:2]) / 400))
+    for i in range(k):
+        for j in range(i + 1, k):
+            if adj[i, j]:
+                p = (int(round(pts[i, 1])), int(round(pts[i, 0])))
+                q = (int(round(pts[j, 1])), int(round(pts[j, 0])))
+                cv2.line(img, p, q, (255, 255, 255), scale, cv2.LINE_AA)
+    lo, hi = float(d.min()), float(d.max())
+    for i in range(k):
+        g = (d[i] - lo) / max(hi - lo, 1e-12)
+        color = tuple(int(c) for c in cv2.applyColorMap(np.uint8([[g * 255]]), cv2.COLORMAP_TURBO)[0, 0][::-1])
+        c = (int(round(pts[i, 1])), int(round(pts[i, 0])))
+        cv2.circle(img, c, 4 * scale, color, -1, cv2.LINE_AA)
+        cv2.circle(img, c, 4 * scale, (0, 0, 0), max(1, scale // 2), cv2.LINE_AA)
+    return img
+
+
+def draw_areas(background: np.ndarray, labels: torch.Tensor, kept_neurons: list[list[int]],
+               boxes: list[tuple[int, int, int, int]], object_mask: torch.Tensor | None = None,
+               extra_mask: torch.Tensor | None = None) -> np.ndarray:
+    """Kept object areas tinted, kept boxes in yellow, the ground-truth object outline in green and
+    an optional extra mask (e.g. the ground plane) tinted blue.
+
+    Shape:
+        ``background`` ``(H, W, 3)`` uint8, ``labels`` ``(H, W)`` long, masks ``(H, W)`` bool.
+    """
+    img = background.astype(np.float32).copy()
+    lab = labels.cpu().numpy()
+    if extra_mask is not None:
+        m = extra_mask.cpu().numpy()
+        img[m] = 0.5 * img[m] + 0.5 * np.array([40, 90, 255], np.float32)
+    tints = [(255, 60, 60), (255, 160, 0), (200, 60, 255), (0, 200, 200)]
+    for i, neurons in enumerate(kept_neurons):
+        m = np.isin(lab, np.asarray(neurons))
+        img[m] = 0.45 * img[m] + 0.55 * np.array(tints[i % len(tints)], np.float32)
+    out = img.clip(0, 255).astype(np.uint8)
+    if object_mask is not None:
+        contours, _ = cv2.findContours(object_mask.cpu().numpy().astype(np.uint8), cv2.RETR_EXTERNAL,
+                                       cv2.CHAIN_APPROX_NONE)
+        cv2.drawContours(out, contours, -1, (0, 255, 0), 2)
+    for x0, y0, x1, y1 in boxes:
+        cv2.rectangle(out, (x0, y0), (x1, y1), (255, 255, 0), 2)
+    return out
+
+
+def image_or_disparity(image: torch.Tensor | None, disparity: torch.Tensor, valid: torch.Tensor) -> np.ndarray:
+    """The left image as ``(H, W, 3)`` uint8, or a grey disparity rendering when there is none."""
+    if image is not None:
+        return image.permute(1, 2, 0).contiguous().cpu().numpy()
+    return grey(disparity, valid)
