@@ -1,0 +1,433 @@
+"""Readers and writers for disparity maps, images and instance masks in their real on-disk formats.
+
+Everything format-specific ends here: a reader returns a float disparity map plus a boolean valid mask,
+never a magic ``0`` or ``inf`` for "no disparity". Values at invalid pixels are set to ``0.0`` and are
+meaningless; consumers must use ``valid``.
+
+Formats (see ``../shared/data/README.md``):
+
+* ``.pfm``: float32, rows stored bottom-to-top, header scale sign = endianness (its magnitude is
+  ignored: Middlebury ``Motorcycle_Q`` writes ``-1/255`` but its floats already are pixels);
+  ``inf``/``nan`` = no disparity. Read by :func:`read_pfm`, never by ``cv2.imread`` (it rejects the
+  Freiburg header and divides by the scale magnitude).
+* ``.png`` 16-bit (KITTI, OAK-D): ``d = value / 256``, ``0`` = no disparity.
+* ``.npy`` / ``.npz``: a 2-D numeric array (key ``disparity``, ``disp`` or the only array).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+from somtorch.atomic import write_bytes
+from somtorch.validation import DataFileError, require_file
+
+__all__ = [
+    "DISPARITY_SUFFIXES",
+    "parse_middlebury_calib",
+    "read_disparity",
+    "read_image",
+    "read_json",
+    "read_mask",
+    "read_pfm",
+    "write_pfm",
+]
+
+log = logging.getLogger(__name__)
+
+DISPARITY_SUFFIXES: tuple[str, ...] = (".pfm", ".png", ".npy", ".npz")
+"""File suffixes :func:`read_disparity` understands."""
+
+_NPZ_KEYS = ("disparity", "disp")
+_PNG16_SCALE = 1.0 / 256.0  # KITTI / OAK-D convention: d = value / 256
+_WHITESPACE = re.compile(rb"\s+")
+
+
+# ----------------------------------------------------------------------------------------------- PFM
+
+
+def read_pfm(path: str | Path, *, channel: int | None = None) -> tuple[np.ndarray, float]:
+    """Read a PFM file into a top-to-bottom float32 array.
+
+    The header is parsed tolerantly: its three fields (``Pf``/``PF``, ``width height``, ``scale``) are
+    split on any whitespace, so Freiburg's trailing spaces and ``\\r\\n`` line ends are accepted. The
+    sign of ``scale`` gives the byte order (negative = little-endian); its magnitude is returned but
+    NOT applied, because in the data sets we use the stored floats already are pixels.
+
+    Colour files (``PF``, 3 channels) are rejected unless ``channel`` picks one: a 3-channel PFM is
+    usually not a disparity map (Freiburg optical-flow files are ``PF``), so taking a channel silently
+    would hide a wrong file.
+
+    Args:
+        path: the ``.pfm`` file.
+        channel: for colour (``PF``) files only, the channel (0, 1 or 2) to return.
+
+    Returns:
+        ``(array, scale)``: the float32 values (native byte order, rows top-to-bottom, ``inf``/``nan``
+        kept as stored) and the header scale.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist.
+        DataFileError: bad header, non-positive size, truncated data, or a colour file without
+            ``channel``.
+
+    Shape:
+        - Output array: :math:`(H, W)`.
+    """
+    path = require_file(path, "PFM file")
+    raw = path.read_bytes()
+    kind, width, height, scale, offset = _parse_pfm_header(path, raw)
+    n_channels = 3 if kind == "PF" else 1
+    if n_channels == 1 and channel not in (None, 0):
+        raise DataFileError(path, f"channel={channel} requested but the file is single-channel (Pf)")
+    if n_channels == 3:
+        if channel is None:
+            raise DataFileError(path, "colour PFM (PF, 3 channels) is not a single-channel disparity map "
+                                      "(Freiburg optical flow is stored this way); pass channel=0, 1 or 2 "
+                                      "to read one channel")
+        if channel not in (0, 1, 2):
+            raise DataFileError(path, f"channel must be 0, 1 or 2 for a colour PFM; got {channel!r}")
+    expected = width * height * n_channels * 4
+    available = len(raw) - offset
+    if available < expected:
+        raise DataFileError(path, f"truncated PFM data: {width}x{height}x{n_channels} float32 needs "
+                                  f"{expected} bytes after the header, found {available}")
+    if available > expected:
+        log.warning("%s: %d extra bytes after the PFM data ignored", path, available - expected)
+    dtype = np.dtype("<f4") if scale < 0 else np.dtype(">f4")
+    data = np.frombuffer(raw, dtype=dtype, count=width * height * n_channels, offset=offset)
+    data = data.reshape(height, width, n_channels)[::-1, :, channel or 0]  # (H, W), rows top-to-bottom
+    return np.ascontiguousarray(data, dtype=np.float32), scale
+
+
+def _parse_pfm_header(path: Path, raw: bytes) -> tuple[str, int, int, float, int]:
+    """Return ``(kind, width, height, scale, data_offset)``; the header is the first three lines."""
+    tokens: list[bytes] = []
+    offset = 0
+    for _ in range(3):
+        end = raw.find(b"\n", offset)
+        if end < 0:
+            raise DataFileError(path, "bad PFM header: expected 3 header lines ('Pf' or 'PF', "
+                                      "'width height', 'scale'), the file ends before them")
+        tokens.extend(t for t in _WHITESPACE.split(raw[offset:end]) if t)
+        offset = end + 1
+        if len(tokens) >= 4:
+            break
+    if len(tokens) != 4:
+        shown = b" ".join(tokens)[:60]
+        raise DataFileError(path, f"bad PFM header: expected 'Pf|PF', width, height, scale; got {shown!r}")
+    kind = tokens[0].decode("ascii", errors="replace")
+    if kind not in ("Pf", "PF"):
+        raise DataFileError(path, f"bad PFM header: magic must be 'Pf' (grey) or 'PF' (colour); got {kind!r}")
+    try:
+        width, height = int(tokens[1]), int(tokens[2])
+        scale = float(tokens[3])
+    except ValueError:
+        raise DataFileError(path, "bad PFM header: width/height must be integers and scale a number; got "
+                                  f"{b' '.join(tokens[1:]).decode('ascii', errors='replace')!r}") from None
+    if width <= 0 or height <= 0:
+        raise DataFileError(path, f"bad PFM header: image size must be positive; got width={width}, "
+                                  f"height={height}")
+    if not np.isfinite(scale) or scale == 0:
+        raise DataFileError(path, f"bad PFM header: scale must be a non-zero number (its sign is the byte "
+                                  f"order); got {scale}")
+    if abs(scale) != 1.0:
+        log.debug("%s: PFM scale %g; only its sign (byte order) is used", path, scale)
+    return kind, width, height, scale, offset
+
+
+def write_pfm(path: str | Path, array: np.ndarray | torch.Tensor, *, little_endian: bool = True) -> Path:
+    """Write a float array as PFM (rows bottom-to-top, scale ``-1`` or ``+1``), atomically.
+
+    Written through :func:`somtorch.atomic.write_bytes` (temporary file in the same folder, then
+    ``os.replace``), so readers never see a half-written file; missing folders are created.
+
+    Args:
+        path: destination ``.pfm`` file.
+        array: ``(H, W)`` for ``Pf`` or ``(H, W, 3)`` for ``PF``; cast to float32 (``inf``/``nan`` kept).
+        little_endian: byte order; scale ``-1.0`` if True, ``+1.0`` (big-endian) otherwise.
+
+    Returns:
+        The path written.
+
+    Shape:
+        - array: :math:`(H, W)` or :math:`(H, W, 3)`.
+
+    Example:
+        >>> import tempfile, numpy as np
+        >>> f = Path(tempfile.mkdtemp()) / "d.pfm"
+        >>> _ = write_pfm(f, np.arange(6, dtype=np.float32).reshape(2, 3))
+        >>> read_pfm(f)[0].tolist()
+        [[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]]
+    """
+    a = array.detach().cpu().numpy() if isinstance(array, torch.Tensor) else np.asarray(array)
+    if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)) or a.size == 0:
+        raise ValueError(f"array must be a non-empty (H, W) or (H, W, 3) array; got shape {a.shape}")
+    if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise TypeError(f"array must be numeric; got dtype {a.dtype}")
+    kind = "PF" if a.ndim == 3 else "Pf"
+    height, width = a.shape[:2]
+    body = np.ascontiguousarray(a[::-1], dtype="<f4" if little_endian else ">f4").tobytes()  # bottom row 1st
+    header = f"{kind}\n{width} {height}\n{-1.0 if little_endian else 1.0}\n".encode("ascii")
+    return write_bytes(path, header + body)
+
+
+# ------------------------------------------------------------------------------------------ disparity
+
+
+def read_disparity(
+    path: str | Path, *, scale: float | None = None, invalid_value: float | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Read a disparity map and its valid mask, dispatching on the file suffix.
+
+    A pixel is invalid if its value is non-finite, negative (negative disparities are removed, as in
+    the paper), equal to ``invalid_value`` (compared with the stored value, before ``scale``), or — for
+    PNG, where ``0`` codes "no disparity" — zero.
+
+    Args:
+        path: ``.pfm``, ``.png`` (single channel), ``.npy`` or ``.npz`` file.
+        scale: multiplier from stored values to pixels. Default: ``1/256`` for 16-bit PNG (KITTI,
+            OAK-D), ``1`` otherwise. 8-bit PNG has no standard encoding and needs an explicit ``scale``.
+        invalid_value: an extra stored value that codes "no disparity" (e.g. ``-1`` in some ``.npy``).
+
+    Returns:
+        ``(disparity, valid)``: float32 pixels (``0.0`` at invalid pixels — meaningless, use ``valid``)
+        and a bool mask.
+
+    Raises:
+        ValueError: unknown suffix (the message lists the supported ones).
+        FileNotFoundError: ``path`` does not exist.
+        DataFileError: the file cannot be decoded, is not a 2-D map, or is an 8-bit PNG without ``scale``.
+
+    Shape:
+        - disparity: :math:`(H, W)`, float32.
+        - valid: :math:`(H, W)`, bool.
+    """
+    path = Path(path).expanduser()
+    suffix = path.suffix.lower()
+    if suffix not in DISPARITY_SUFFIXES:
+        raise ValueError(f"{path}: unknown disparity file suffix {path.suffix!r}; supported: "
+                         f"{', '.join(DISPARITY_SUFFIXES)}")
+    if scale is not None and (isinstance(scale, bool) or not np.isfinite(scale) or scale <= 0):
+        raise ValueError(f"scale must be a finite number > 0 (stored value * scale = pixels); got {scale!r}")
+    path = require_file(path, "disparity file")
+    zero_is_invalid = False
+    if suffix == ".pfm":
+        raw: np.ndarray = read_pfm(path)[0]
+    elif suffix == ".png":
+        raw = _read_png_disparity(path, scale)
+        zero_is_invalid = True
+        if scale is None:
+            scale = _PNG16_SCALE
+    elif suffix == ".npy":
+        raw = _load_npy(path)
+    else:
+        raw = _load_npz(path)
+    raw = _as_2d_numeric(path, raw)
+    values = raw.astype(np.float64) * (1.0 if scale is None else scale)  # (H, W)
+    valid = np.isfinite(values) & (values >= 0)
+    if zero_is_invalid:
+        valid &= raw != 0
+    if invalid_value is not None:
+        valid &= raw != invalid_value
+    disparity = np.where(valid, values, 0.0).astype(np.float32)
+    return torch.from_numpy(disparity), torch.from_numpy(valid)
+
+
+def _read_png_disparity(path: Path, scale: float | None) -> np.ndarray:
+    img = _imread(path)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    if img.ndim != 2:
+        raise DataFileError(path, f"a disparity PNG must have one channel; got shape {img.shape} "
+                                  "(a colour PNG is a visualisation, not a disparity map)")
+    if img.dtype == np.uint8 and scale is None:
+        raise DataFileError(path, "8-bit PNG has no standard disparity encoding (KITTI and OAK-D store "
+                                  "uint16 with d = value / 256); it is usually a visualisation whose scale "
+                                  "is lost. If it really holds disparities, pass scale= explicitly "
+                                  "(e.g. scale=1.0 for integer pixels)")
+    if img.dtype not in (np.uint8, np.uint16):
+        raise DataFileError(path, f"unsupported PNG sample type {img.dtype}; expected uint16 (or uint8 "
+                                  "with an explicit scale)")
+    return img
+
+
+def _load_npy(path: Path) -> np.ndarray:
+    try:
+        return np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as e:
+        raise DataFileError(path, f"cannot read .npy: {e}") from None
+
+
+def _load_npz(path: Path) -> np.ndarray:
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as e:
+        raise DataFileError(path, f"cannot read .npz: {e}") from None
+    if isinstance(data, np.ndarray):  # a plain .npy under a .npz name
+        return data
+    with data:
+        keys = list(data.files)
+        if not keys:
+            raise DataFileError(path, "the .npz archive contains no arrays; expected one named "
+                                      f"{' or '.join(_NPZ_KEYS)}")
+        key = next((k for k in _NPZ_KEYS if k in keys), keys[0] if len(keys) == 1 else None)
+        if key is None:
+            raise DataFileError(path, f"cannot tell which array is the disparity: keys {keys}; "
+                                      f"name it {' or '.join(_NPZ_KEYS)}, or store a single array")
+        try:
+            return data[key]
+        except (ValueError, OSError, EOFError) as e:
+            raise DataFileError(path, f"cannot read array {key!r} from the .npz: {e}") from None
+
+
+def _as_2d_numeric(path: Path, a: np.ndarray) -> np.ndarray:
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[:, :, 0]
+    if a.ndim != 2:
+        raise DataFileError(path, f"a disparity map must be 2-D (H, W); got shape {a.shape}")
+    if a.size == 0:
+        raise DataFileError(path, f"the disparity map is empty (shape {a.shape})")
+    if a.dtype == np.bool_ or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise DataFileError(path, f"a disparity map must hold real numbers; got dtype {a.dtype}")
+    return a
+
+
+# ----------------------------------------------------------------------------------- images and masks
+
+
+def _imread(path: Path) -> np.ndarray:
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise DataFileError(path, "OpenCV cannot decode this file as an image (corrupt, empty or not an "
+                                  "image format)")
+    return img
+
+
+def read_image(path: str | Path) -> torch.Tensor:
+    """Read an image as RGB uint8, channels first.
+
+    Grey images are replicated to 3 channels, an alpha channel is dropped, OpenCV's BGR order is turned
+    into RGB, and 16-bit images are reduced to 8 bits (``value // 257``).
+
+    Args:
+        path: any image file OpenCV decodes (PNG, JPEG, ...).
+
+    Returns:
+        The image as a uint8 tensor.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist.
+        DataFileError: the file cannot be decoded or has an unsupported channel count or dtype.
+
+    Shape:
+        - Output: :math:`(3, H, W)`.
+    """
+    path = require_file(path, "image file")
+    img = _imread(path)
+    if img.dtype == np.uint16:
+        img = (img // 257).astype(np.uint8)
+    if img.dtype != np.uint8:
+        raise DataFileError(path, f"unsupported image sample type {img.dtype}; expected uint8 or uint16")
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    elif img.ndim == 3 and img.shape[2] == 1:
+        img = np.repeat(img, 3, axis=2)
+    elif img.ndim == 3 and img.shape[2] == 3:
+        img = img[:, :, ::-1]  # BGR -> RGB
+    elif img.ndim == 3 and img.shape[2] == 4:
+        img = img[:, :, 2::-1]  # BGRA -> RGB, alpha dropped
+    else:
+        raise DataFileError(path, f"unsupported image layout {img.shape}; expected grey, RGB or RGBA")
+    return torch.from_numpy(np.ascontiguousarray(img.transpose(2, 0, 1)))  # (3, H, W)
+
+
+def read_mask(path: str | Path) -> torch.Tensor:
+    """Read an instance map (``0`` = background, ``1..n`` = object id).
+
+    Args:
+        path: a single-channel integer image (uint8 or uint16 PNG). A 3-channel file is accepted only
+            if its channels are identical.
+
+    Returns:
+        The ids as an int64 tensor.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist.
+        DataFileError: the file cannot be decoded, has differing colour channels or a non-integer type.
+
+    Shape:
+        - Output: :math:`(H, W)`.
+    """
+    path = require_file(path, "mask file")
+    img = _imread(path)
+    if img.ndim == 3:
+        if img.shape[2] == 4:
+            img = img[:, :, :3]
+        if not all(np.array_equal(img[:, :, 0], img[:, :, c]) for c in range(1, img.shape[2])):
+            raise DataFileError(path, f"an instance map must have one channel; got shape {img.shape} with "
+                                      "differing channels (a colour overlay, not an id map?)")
+        img = img[:, :, 0]
+    if not np.issubdtype(img.dtype, np.integer):
+        raise DataFileError(path, f"an instance map must hold integer ids; got dtype {img.dtype}")
+    return torch.from_numpy(img.astype(np.int64))
+
+
+# ------------------------------------------------------------------------------- calibration and json
+
+
+def read_json(path: str | Path) -> dict[str, Any]:
+    """Read a file holding one JSON object (``objects.json``, a calibration); bad JSON -> DataFileError."""
+    path = require_file(path, "JSON file")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DataFileError(path, f"invalid JSON: {e}") from None
+    if not isinstance(doc, dict):
+        raise DataFileError(path, f"expected a JSON object at the top level; got {type(doc).__name__}")
+    return doc
+
+
+def parse_middlebury_calib(path: str | Path) -> dict[str, Any]:
+    """Parse a Middlebury-format ``calib.txt`` (also used by ETH3D).
+
+    Returns:
+        ``key -> value``: matrices (``cam0=[f 0 cx; 0 f cy; 0 0 1]``) as float64 arrays of shape
+        :math:`(3, 3)`, integers as ``int``, other numbers as ``float``, anything else as ``str``.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist.
+        DataFileError: a line is not ``key=value`` or a matrix is malformed.
+    """
+    path = require_file(path, "calibration file")
+    out: dict[str, Any] = {}
+    for n, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), start=1):
+        if not line.strip():
+            continue
+        key, sep, value = line.partition("=")
+        if not sep or not key.strip():
+            raise DataFileError(path, f"line {n}: expected 'key=value'; got {line.strip()[:60]!r}")
+        value = value.strip()
+        if value.startswith("["):
+            try:
+                rows = [[float(x) for x in r.split()] for r in value.strip("[]").split(";")]
+                out[key.strip()] = np.array(rows, dtype=np.float64)
+            except ValueError:
+                raise DataFileError(path, f"line {n}: malformed matrix {value[:60]!r}") from None
+            if out[key.strip()].shape != (3, 3):
+                raise DataFileError(path, f"line {n}: matrix {key.strip()} must be 3x3; got {value[:60]!r}")
+            continue
+        for cast in (int, float, str):
+            try:
+                out[key.strip()] = cast(value)
+                break
+            except ValueError:
+                pass
+    return out
