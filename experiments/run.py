@@ -15,6 +15,9 @@ Examples::
 from __future__ import annotations
 
 import logging
+import os
+import shutil
+import tempfile
 import time
 from pathlib import Path
 
@@ -50,7 +53,11 @@ def load_input(cfg: RunConfig):
 
 
 def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> dict:
-    """Run the pipeline described by ``cfg`` and write every output into ``out_dir``."""
+    """Run the pipeline described by ``cfg`` and write every output into ``out_dir``.
+
+    Everything is written into a staging folder first and moved into ``out_dir`` only when the
+    whole run succeeded (``metrics.json`` last), so a failed or killed run leaves no partial results.
+    """
     import torch
 
     from somtorch.atomic import write_json
@@ -63,35 +70,47 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
     if not 0 <= cfg.output.member < cfg.ensemble:
         raise ValueError(f"output.member={cfg.output.member} must be in [0, ensemble={cfg.ensemble})")
-    pcfg = PipelineConfig(features=cfg.features, som=cfg.som, train=cfg.train, objects=cfg.objects,
-                          reduction=cfg.reduction, ensemble=cfg.ensemble, seed=cfg.seed,
+    pcfg = PipelineConfig(features=cfg.features, som=cfg.som, train=cfg.train, ground=cfg.ground,
+                          objects=cfg.objects, reduction=cfg.reduction, ensemble=cfg.ensemble, seed=cfg.seed,
                           object_id=cfg.object_id)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     writer = None
-    if cfg.output.tensorboard:
-        from torch.utils.tensorboard import SummaryWriter
-        writer = SummaryWriter(str(out_dir / "tb"))
     try:
+        if cfg.output.tensorboard:
+            from torch.utils.tensorboard import SummaryWriter
+            writer = SummaryWriter(str(stage / "tb"))
         result = run_pipeline(scene, pcfg, progress=False, log_training=writer.add_scalar if writer else None)
         metrics = summarize(scene, result, config_dict)
-        out_dir.mkdir(parents=True, exist_ok=True)
+        if result.ground is not None:
+            metrics["ground_plane"] = result.ground.as_dict()
         if cfg.output.maps:
-            pics = write_maps(scene, result, out_dir, member=cfg.output.member)
+            pics = write_maps(scene, result, stage, member=cfg.output.member)
             if writer is not None:
                 for name, img in pics.items():
                     writer.add_image(f"maps/{name}", torch.from_numpy(img).permute(2, 0, 1), 0)
         if cfg.output.pointcloud:
             metrics["pointcloud"] = write_point_clouds(
-                scene, result, out_dir, member=cfg.output.member, voxel_size=cfg.output.voxel_size,
+                scene, result, stage, member=cfg.output.member, voxel_size=cfg.output.voxel_size,
                 render=cfg.output.render, render_backend=cfg.output.render_backend)
         if cfg.output.checkpoint:
-            result.som.save(out_dir / "som.safetensors")
+            result.som.save(stage / "som.safetensors")
         if writer is not None:
             _log_hparams(writer, cfg, metrics)
+            writer.close()
+            writer = None
+        metrics["timings_s"]["total"] = time.perf_counter() - t_start
+        write_json(stage / "metrics.json", metrics)
+        entries = sorted(stage.iterdir(), key=lambda p: p.name == "metrics.json")
+        for entry in entries:  # metrics.json last: its presence marks a complete run
+            target = out_dir / entry.name
+            if target.is_dir():
+                shutil.rmtree(target)
+            os.replace(entry, target)
     finally:
         if writer is not None:
             writer.close()
-    metrics["timings_s"]["total"] = time.perf_counter() - t_start
-    write_json(out_dir / "metrics.json", metrics)
+        shutil.rmtree(stage, ignore_errors=True)
     s = metrics.get("summary")
     log.info("scene %s: %d valid px, %d train px, timings %s", scene.name, scene.n_valid,
              metrics["pixels"]["train"], {k: round(v, 4) for k, v in metrics["timings_s"].items()})

@@ -10,9 +10,11 @@ from dataclasses import dataclass, field
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
 
 from somtorch.outputs import OutputConfig
 from somtorch.pipeline import FeatureConfig, ReductionConfig, SOMConfig, TrainConfig
+from somtorch.tasks.ground import GroundConfig
 from somtorch.tasks.objects import AreaConfig
 
 
@@ -22,13 +24,15 @@ class DataConfig:
 
     ``source``: ``"motorcycle"`` (the embedded Middlebury scene of scikit-image), a scene folder
     (every layout of ../shared/data) or a disparity file (PFM, 16-bit PNG, NPY, NPZ). With ``left``
-    and ``right`` set instead, the disparity is computed with OpenCV StereoSGBM (``sgbm``).
+    and ``right`` set instead, the disparity is computed with OpenCV StereoSGBM (``sgbm``). Every
+    ``conf/data`` option sets ``source``, ``left`` and ``right`` (null where unused), so a missing
+    mandatory value (``???``) fails at composition.
     """
 
-    source: Optional[str] = "motorcycle"
+    source: Optional[str] = MISSING
     disparity_file: Optional[str] = None
-    left: Optional[str] = None
-    right: Optional[str] = None
+    left: Optional[str] = MISSING
+    right: Optional[str] = MISSING
     sgbm: dict[str, Any] = field(default_factory=dict)
     name: Optional[str] = None
 
@@ -45,6 +49,7 @@ class RunConfig:
     features: FeatureConfig = field(default_factory=FeatureConfig)
     som: SOMConfig = field(default_factory=SOMConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
+    ground: GroundConfig = field(default_factory=GroundConfig)
     objects: AreaConfig = field(default_factory=AreaConfig)
     reduction: ReductionConfig = field(default_factory=ReductionConfig)
     output: OutputConfig = field(default_factory=OutputConfig)

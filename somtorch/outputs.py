@@ -22,6 +22,7 @@ from .atomic import atomic_path, write_json
 from .disparity.scene import Scene
 from .pipeline import PipelineResult
 from .tasks.segmentation import color_map, grey_map
+from .validation import check_choice, check_positive
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +39,13 @@ class OutputConfig:
     checkpoint: bool = True
     tensorboard: bool = True
     member: int = 0
+
+    def __post_init__(self) -> None:
+        if self.voxel_size is not None:
+            check_positive("output.voxel_size", self.voxel_size)
+        check_choice("output.render_backend", self.render_backend, ("auto", "open3d", "matplotlib"))
+        if self.member < 0:
+            raise ValueError(f"output.member must be >= 0; got {self.member}")
 
 
 def _finite(v: float) -> float | None:

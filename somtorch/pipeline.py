@@ -17,12 +17,21 @@ import torch
 
 from .core import SOM, StepInfo
 from .disparity.features import Features, make_features
+from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
-from .tasks.objects import AreaConfig, NeuronStats, ObjectArea, find_object_areas, neuron_stats, select_areas
+from .tasks.ground import GroundConfig, GroundPlane, fit_ground_plane
+from .tasks.objects import (AreaConfig, NeuronStats, ObjectArea, find_object_areas, grow_area, neuron_stats,
+                            select_areas)
 from .tasks.reduction import Reduction, reduce_map
 from .tasks.scoring import Score, score_reduction
 from .tasks.segmentation import segment
-from .validation import check_positive_int
+from .core.decay import DECAYS
+from .core.grid import TOPOLOGIES
+from .core.init import INITS
+from .core.neighborhood import NEIGHBORHOODS
+from .core.som import MODES, ORDERS
+from .disparity.features import NORMALIZATIONS
+from .validation import check_choice, check_positive, check_positive_int
 
 
 @dataclass
@@ -36,6 +45,13 @@ class FeatureConfig:
     normalize: str = "image"
     d_weight: float = 1.0
     train_stride: int = 10
+    speckle_frac: float = 0.0  # remove_speckles max_size_frac (0 = off; for computed SGBM maps)
+
+    def __post_init__(self) -> None:
+        check_choice("features.normalize", self.normalize, NORMALIZATIONS)
+        check_positive("features.d_weight", self.d_weight)
+        check_positive_int("features.train_stride", self.train_stride)
+        check_positive("features.speckle_frac", self.speckle_frac, allow_zero=True)
 
 
 @dataclass
@@ -45,6 +61,12 @@ class SOMConfig:
     topology: str = "rectangular"
     toroidal: bool = False
     init: str = "random"
+
+    def __post_init__(self) -> None:
+        check_positive_int("som.rows", self.rows)
+        check_positive_int("som.cols", self.cols)
+        check_choice("som.topology", self.topology, TOPOLOGIES)
+        check_choice("som.init", self.init, INITS)
 
 
 @dataclass
@@ -61,11 +83,27 @@ class TrainConfig:
     order: str = "random"
     batch_size: int = 256
 
+    def __post_init__(self) -> None:
+        check_choice("train.mode", self.mode, MODES)
+        check_positive_int("train.epochs", self.epochs)
+        check_positive("train.lr", self.lr)
+        if self.sigma is not None:
+            check_positive("train.sigma", self.sigma)
+        check_choice("train.lr_decay", self.lr_decay, DECAYS)
+        check_choice("train.sigma_decay", self.sigma_decay, DECAYS)
+        check_choice("train.neighborhood", self.neighborhood, NEIGHBORHOODS)
+        check_choice("train.order", self.order, ORDERS)
+        check_positive_int("train.batch_size", self.batch_size)
+
 
 @dataclass
 class ReductionConfig:
     tolerance_px: float = 0.0
     tolerance_frac: float = 0.05
+
+    def __post_init__(self) -> None:
+        check_positive("reduction.tolerance_px", self.tolerance_px, allow_zero=True)
+        check_positive("reduction.tolerance_frac", self.tolerance_frac, allow_zero=True)
 
 
 @dataclass
@@ -73,11 +111,15 @@ class PipelineConfig:
     features: FeatureConfig = field(default_factory=FeatureConfig)
     som: SOMConfig = field(default_factory=SOMConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
+    ground: GroundConfig = field(default_factory=GroundConfig)
     objects: AreaConfig = field(default_factory=AreaConfig)
     reduction: ReductionConfig = field(default_factory=ReductionConfig)
     ensemble: int = 1
     seed: int = 0
     object_id: int | None = None  # scored object; None = the scene's main object(s)
+
+    def __post_init__(self) -> None:
+        check_positive_int("ensemble", self.ensemble)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -106,6 +148,7 @@ class PipelineResult:
     timings: dict[str, float]
     quantization_error: torch.Tensor
     topographic_error: torch.Tensor
+    ground: GroundPlane | None = None
 
 
 def _tic() -> float:
@@ -128,7 +171,14 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     check_positive_int("ensemble", cfg.ensemble)
     t: dict[str, float] = {}
     t0 = _tic()
-    feats = make_features(scene.disparity, scene.valid, normalize=cfg.features.normalize,
+    valid = remove_speckles(scene.disparity, scene.valid, max_size_frac=cfg.features.speckle_frac)
+    t["clean"] = _tic() - t0
+    t0 = _tic()
+    ground = fit_ground_plane(scene.disparity, valid, cfg.ground)
+    t["ground"] = _tic() - t0
+    t0 = _tic()
+    usable = valid if ground is None else valid & ~ground.mask
+    feats = make_features(scene.disparity, usable, normalize=cfg.features.normalize,
                           d_weight=cfg.features.d_weight)
     train = feats.subsample(cfg.features.train_stride)
     if len(train) == 0:
@@ -168,6 +218,8 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         stats = neuron_stats(labels[e], scene.disparity, som.num_neurons)
         areas = find_object_areas(ref_d[e], som.grid_d2, stats, cfg.objects)
         kept = select_areas(areas, stats, cfg.objects)
+        if cfg.objects.grow:
+            kept = [grow_area(a, labels[e], scene.disparity, usable, stride=cfg.objects.grow_stride) for a in kept]
         t1 = _tic()
         red = reduce_map([a.box for a in kept], scene.valid, tolerance_px=cfg.reduction.tolerance_px,
                          tolerance_frac=cfg.reduction.tolerance_frac)
@@ -181,4 +233,4 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         qe, te = som.quantization_error(train.x), som.topographic_error(train.x)
     else:
         qe = te = torch.full((cfg.ensemble,), float("nan"))
-    return PipelineResult(feats, train, som, labels, ref_d, members, t, qe, te)
+    return PipelineResult(feats, train, som, labels, ref_d, members, t, qe, te, ground)

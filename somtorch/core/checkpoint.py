@@ -48,6 +48,9 @@ def load(cls: type[SOM], path: str | os.PathLike, *, device=None) -> SOM:
     from safetensors import SafetensorError
     from safetensors import safe_open
 
+    given = Path(path)
+    if given.is_file() and given.suffix != ".safetensors":
+        raise DataFileError(given, "is not a SOM checkpoint (expected a .safetensors file written by SOM.save)")
     wpath, _ = _paths(path)
     require_file(wpath, "SOM checkpoint")
     try:

@@ -15,12 +15,13 @@ from .neighborhood import NeighborhoodFn
 
 
 def soft_assign(x: torch.Tensor, weight: torch.Tensor, temperature: float | torch.Tensor) -> torch.Tensor:
-    """Soft BMU weights, differentiable w.r.t. ``x`` and ``weight``.
+    """Soft BMU weights, differentiable w.r.t. ``x`` and ``weight``; ``temperature`` scalar or ``(E,)``.
 
     Shape:
         ``x`` ``(N, D)`` or ``(E, N, D)``, ``weight`` ``(E, K, D)`` → ``(E, N, K)``, rows sum to 1.
     """
-    return torch.softmax(-pairwise_sqdist(x, weight) / temperature, dim=-1)
+    tau = torch.as_tensor(temperature, dtype=weight.dtype, device=weight.device).reshape(-1, 1, 1)
+    return torch.softmax(-pairwise_sqdist(x, weight) / tau, dim=-1)
 
 
 def som_energy(x: torch.Tensor, weight: torch.Tensor, grid_d2: torch.Tensor, sigma: torch.Tensor,

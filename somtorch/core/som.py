@@ -317,15 +317,15 @@ class SOM(nn.Module):
 
     def soft_assign(self, x: torch.Tensor, temperature: float | torch.Tensor = 1.0) -> torch.Tensor:
         """Differentiable soft BMU weights ``softmax(−‖x − w‖²/τ)`` ``(E, N, K)``."""
-        check_positive("temperature", temperature)
-        return soft_assign(self._check_x(x), self.weight, temperature)
+        tau = self._per_member("temperature", temperature)
+        return soft_assign(self._check_x(x), self.weight, tau)
 
     def loss(self, x: torch.Tensor, sigma: float | torch.Tensor = 1.0,
              neighborhood: str | NeighborhoodFn = "gaussian") -> torch.Tensor:
         """SOM energy per member ``(E,)`` (see :func:`somtorch.core.losses.som_energy`)."""
-        check_positive("sigma", sigma)
+        sig = self._per_member("sigma", sigma)
         nb = resolve("neighborhood", neighborhood, NEIGHBORHOODS)
-        return som_energy(self._check_x(x), self.weight, self.grid_d2, torch.as_tensor(sigma), nb)
+        return som_energy(self._check_x(x), self.weight, self.grid_d2, sig, nb)
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike) -> Path:

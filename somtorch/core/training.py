@@ -251,12 +251,13 @@ def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_s
 
     n = x.shape[-2]
     per_step = {"online": 1, "batch": n, "minibatch": batch_size}[mode]
-    every = callback_every or max(1, n // per_step)
+    every = callback_every
     block = BLOCK_STEPS if mode == "online" else 1
+    cut_every = every if every else (n if mode == "online" else None)
     bar = tqdm(total=steps, desc=desc, unit="step", disable=not progress, delay=0.5, leave=False)
     try:
         with torch.no_grad():
-            for start, stop in _blocks(steps, block, every if callback is not None else None):
+            for start, stop in _blocks(steps, block, cut_every if callback is not None else None):
                 lr, sigma = sched.values(start, stop, steps)  # (S, E)
                 if mode == "online":
                     xs = _take(x, order.indices(start, stop))
@@ -265,9 +266,15 @@ def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_s
                     batch_step(weight, x, None, sigma[0], grid_d2, neighborhood)
                 else:
                     xs = _take(x, order.indices(start * batch_size, stop * batch_size))
+                    if xs.shape[0] == 1 and x.ndim == 2:
+                        xs = xs[0]  # one order shared by all members: shared samples (B, D)
                     batch_step(weight, xs, lr[0], sigma[0], grid_d2, neighborhood)
                 bar.update(stop - start)
-                if callback is not None and (stop % every == 0 or stop == steps):
+                if every:
+                    fire = stop % every == 0
+                else:  # once per completed epoch
+                    fire = (stop * per_step) // n > (start * per_step) // n
+                if callback is not None and (fire or stop == steps):
                     callback(StepInfo(step=stop, total=steps, epoch=stop * per_step / n,
                                       lr=lr[-1], sigma=sigma[-1], weight=weight))
     finally:

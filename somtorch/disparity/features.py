@@ -11,7 +11,8 @@ How y, x and d are scaled decides what a SOM segment is, so it is explicit here:
 * ``normalize="none"``: raw pixel units (y, x in px, d in px · d_weight).
 
 Negative, non-finite and invalid disparities are removed (their count is reported). The
-runtime-optimised mode (OR) trains on a strided subsample (stride 10 on 1264×720 → 9,072 px) while
+runtime-optimised mode (OR) trains on a strided subsample (stride 10 on 1264×720 → 127·72 = 9,144 px
+here; the paper reports 9,072) while
 the full map is still segmented: :func:`make_features` returns both.
 """
 

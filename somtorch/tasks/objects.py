@@ -28,6 +28,8 @@ import torch
 from ..validation import check_choice, check_positive, check_positive_int, check_tensor
 
 SELECTIONS = ("nearest", "salient", "all")
+LINKS = ("grid", "image", "both")
+SPREADS = ("range", "robust")
 
 
 @dataclass
@@ -35,10 +37,23 @@ class AreaConfig:
     """Parameters of object-area recognition (see the module docstring).
 
     Attributes:
-        similarity: two grid-adjacent neurons are similar if their reference disparities differ by
-            less than ``similarity × (d_max − d_min)`` of the map.
+        similarity: two linked neurons are similar if their reference disparities differ by
+            less than ``similarity × spread`` of the map.
         connectivity: 4 (grid rows/columns only) or 8 (diagonals too) for rectangular maps.
+        link: which neurons may join: ``"grid"`` (adjacent on the SOM grid, the paper's rule),
+            ``"image"`` (their segments share a boundary in the image) or ``"both"``.
+        spread: ``"range"`` (d_max − d_min of the segmented pixels, the paper's reading) or
+            ``"robust"`` (5th–95th percentile, insensitive to the outliers of computed maps).
+        min_boundary: with ``link="image"``/``"both"``, two segments touch if their common boundary
+            is at least this fraction of the shorter of their two perimeters.
         select: ``"nearest"``, ``"salient"`` or ``"all"``.
+        grow: replace each kept area by the image-connected region around it that is nearer than
+            half-way between the area and its surroundings (``mean_disparity − contrast/2``): an
+            object split over several areas is recovered whole, background pixels inside the
+            area's segments are dropped.
+        grow_stride: the growing works on every ``grow_stride``-th pixel (speed).
+        size_power: salient: areas are ranked by ``contrast × area_frac ** size_power`` (0 = by
+            contrast alone; 0.5 favours large salient objects over small salient fragments).
         max_areas: how many areas are kept at most.
         min_contrast: salient: minimum contrast, as a fraction of the disparity range.
         max_area_frac, min_area_frac: size limits as fractions of the valid pixels.
@@ -46,6 +61,12 @@ class AreaConfig:
 
     similarity: float = 0.1
     connectivity: int = 4
+    link: str = "grid"
+    spread: str = "range"
+    min_boundary: float = 0.1
+    size_power: float = 0.0
+    grow: bool = False
+    grow_stride: int = 2
     select: str = "salient"
     max_areas: int = 1
     min_contrast: float = 0.02
@@ -57,6 +78,9 @@ class AreaConfig:
         if self.connectivity not in (4, 8):
             raise ValueError(f"connectivity must be 4 or 8; got {self.connectivity!r}")
         check_choice("select", self.select, SELECTIONS)
+        check_choice("link", self.link, LINKS)
+        check_choice("spread", self.spread, SPREADS)
+        check_positive("min_boundary", self.min_boundary, allow_zero=True)
         check_positive_int("max_areas", self.max_areas)
         check_positive("min_contrast", self.min_contrast, allow_zero=True)
         check_positive("max_area_frac", self.max_area_frac)
@@ -76,6 +100,8 @@ class NeuronStats:
         box: per-segment (x0, y0, x1, y1) ``(K, 4)``; empty segments hold (W, H, −1, −1).
         boundary: image-space boundary length between segments ``(K, K)`` (4-connected pixel pairs).
         d_range: (min, max) disparity of the map.
+        d_robust: (5th, 95th) percentile of the disparity of the map.
+        perimeter: boundary length of each segment with other segments ``(K,)``.
     """
 
     count: torch.Tensor
@@ -83,6 +109,15 @@ class NeuronStats:
     box: torch.Tensor
     boundary: torch.Tensor
     d_range: tuple[float, float]
+    d_robust: tuple[float, float]
+
+    @property
+    def perimeter(self) -> torch.Tensor:
+        return self.boundary.sum(1)
+
+    def spread(self, kind: str) -> float:
+        lo, hi = self.d_range if kind == "range" else self.d_robust
+        return max(hi - lo, 1e-9)
 
 
 @dataclass
@@ -128,7 +163,9 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     flat = torch.cat(pairs)
     boundary = torch.bincount(flat, minlength=k * k).view(k, k).double()
     boundary = boundary + boundary.T
-    return NeuronStats(count, mean_d, box, boundary, (float(d.min()), float(d.max())))
+    sample = d if d.numel() <= 100_000 else d[:: d.numel() // 100_000 + 1]
+    q = torch.quantile(sample, torch.tensor([0.05, 0.95], dtype=torch.float64))
+    return NeuronStats(count, mean_d, box, boundary, (float(d.min()), float(d.max())), (float(q[0]), float(q[1])))
 
 
 def _components(adj: torch.Tensor) -> list[list[int]]:
@@ -165,11 +202,15 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor, stats:
         areas with at least one pixel, in no particular order (see :func:`select_areas`).
     """
     cfg = cfg or AreaConfig()
-    lo, hi = stats.d_range
-    tau = cfg.similarity * max(hi - lo, 1e-9)
+    tau = cfg.similarity * stats.spread(cfg.spread)
     reach = 1.0 + 1e-6 if cfg.connectivity == 4 else 2.0 + 1e-6
     ref = ref_disparity.double().cpu()
-    adj = (grid_d2.cpu() <= reach) & ((ref[:, None] - ref[None, :]).abs() < tau)
+    near = grid_d2.cpu() <= reach
+    if cfg.link != "grid":
+        per = stats.perimeter.clamp_min(1.0)
+        touch = stats.boundary >= cfg.min_boundary * torch.minimum(per[:, None], per[None, :])
+        near = touch if cfg.link == "image" else near | touch
+    adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
     adj.fill_diagonal_(False)
     total = float(stats.count.sum())
     areas = []
@@ -196,17 +237,50 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor, stats:
 def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | None = None) -> list[ObjectArea]:
     """The kept areas, best first, with ``rank`` set (see the module docstring)."""
     cfg = cfg or AreaConfig()
-    lo, hi = stats.d_range
     if cfg.select == "nearest":
         ranked = sorted(areas, key=lambda a: -a.mean_disparity)[:1]
     else:
         ok = [a for a in areas if cfg.min_area_frac <= a.area_frac <= cfg.max_area_frac]
         if cfg.select == "salient":
-            ok = [a for a in ok if a.contrast >= cfg.min_contrast * max(hi - lo, 1e-9)]
-            ranked = sorted(ok, key=lambda a: -a.contrast)
+            ok = [a for a in ok if a.contrast >= cfg.min_contrast * stats.spread(cfg.spread)]
+            ranked = sorted(ok, key=lambda a: -a.contrast * a.area_frac ** cfg.size_power)
         else:
             ranked = sorted(ok, key=lambda a: -a.mean_disparity)
         ranked = ranked[:cfg.max_areas]
     for i, a in enumerate(ranked):
         a.rank = i
     return ranked
+
+
+def grow_area(area: ObjectArea, labels: torch.Tensor, disparity: torch.Tensor, usable: torch.Tensor,
+              *, stride: int = 2) -> ObjectArea:
+    """The image-connected region of pixels nearer than ``mean_disparity − contrast/2`` that touches
+    the area's pixels (see ``AreaConfig.grow``). Returns a new :class:`ObjectArea` with the grown box
+    and pixel count (neurons, disparity and contrast unchanged).
+
+    Shape:
+        ``labels``, ``disparity``, ``usable``: ``(H, W)``; ``usable`` marks the pixels that may join
+        (valid, not ground).
+    """
+    import cv2
+    import numpy as np
+
+    if area.contrast <= 0:
+        return area
+    thr = area.mean_disparity - 0.5 * area.contrast
+    s = max(1, int(stride))
+    lab = labels[::s, ::s].cpu().numpy()
+    near = (usable[::s, ::s] & (disparity[::s, ::s] >= thr)).cpu().numpy()
+    seed = np.isin(lab, np.asarray(area.neurons)) & near
+    if not seed.any():
+        return area
+    n, comp = cv2.connectedComponents(near.astype(np.uint8), connectivity=8)
+    hit = np.unique(comp[seed])
+    hit = hit[hit > 0]
+    region = np.isin(comp, hit)
+    ys, xs = np.nonzero(region)
+    h, w = labels.shape
+    box = (int(xs.min()) * s, int(ys.min()) * s, min(w - 1, int(xs.max()) * s + s - 1),
+           min(h - 1, int(ys.max()) * s + s - 1))
+    return ObjectArea(area.neurons, int(region.sum()) * s * s, box, area.mean_disparity, area.contrast,
+                      area.area_frac, area.rank, {**area.extra, "grown": True, "grow_threshold": thr})

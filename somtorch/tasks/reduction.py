@@ -12,6 +12,7 @@ Reduction % = 100 · (1 − kept valid pixels / valid pixels of the map).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import torch
@@ -58,8 +59,8 @@ def expand_box(box: Box, shape: tuple[int, int], *, tolerance_px: float = 0.0,
     h, w = shape
     mx = tolerance_px + tolerance_frac * (x1 - x0 + 1)
     my = tolerance_px + tolerance_frac * (y1 - y0 + 1)
-    return (max(0, int(x0 - mx)), max(0, int(y0 - my)), min(w - 1, int(round(x1 + mx))),
-            min(h - 1, int(round(y1 + my))))
+    return (max(0, math.floor(x0 - mx)), max(0, math.floor(y0 - my)), min(w - 1, math.ceil(x1 + mx)),
+            min(h - 1, math.ceil(y1 + my)))
 
 
 def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = 0.0,
@@ -81,7 +82,11 @@ def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = 0
     ii[1:, 1:] = valid.long().cumsum(0).cumsum(1)
     mask = torch.zeros(shape, dtype=torch.bool, device=valid.device)
     kept_boxes, crops = [], []
-    for b in boxes:
+    for i, b in enumerate(boxes):
+        if len(b) != 4 or b[0] > b[2] or b[1] > b[3] or b[2] < 0 or b[3] < 0 or b[0] >= shape[1] \
+                or b[1] >= shape[0]:
+            raise ValueError(f"boxes[{i}]={tuple(b)} is not a box (x0, y0, x1, y1) with x0 <= x1, y0 <= y1 "
+                             f"that overlaps the {shape[1]}x{shape[0]} image")
         x0, y0, x1, y1 = expand_box(b, shape, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac)
         kept_boxes.append((x0, y0, x1, y1))
         crops.append(int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0]))

@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# Set up (if needed) and run the main job: the whole pipeline on the embedded Motorcycle scene.
+# Extra arguments are Hydra overrides, e.g.: bash scripts/run.sh data=kitti2015 ensemble=20
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh test
+exec .venv/bin/python -m experiments.run "$@"

@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Set up somtorch on a fresh machine: system library for Open3D, a virtual environment, the CPU
+# build of torch FIRST (a plain `torch` requirement would pull a multi-GB CUDA build), then the rest.
+# Idempotent: a second run only checks. Usage: bash scripts/setup.sh [extra, default "test"]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+EXTRA="${1:-test}"
+PY="${PYTHON:-python3.11}"
+command -v "$PY" >/dev/null 2>&1 || PY=python3
+
+# 1. Open3D needs libusb-1.0 (Debian/Ubuntu: libusb-1.0-0).
+if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+  if command -v apt-get >/dev/null 2>&1; then
+    SUDO=""; [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1 && SUDO="sudo"
+    echo "[setup] installing libusb-1.0-0 for Open3D"
+    $SUDO apt-get update -qq && $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null
+  else
+    echo "[setup] WARNING: libusb-1.0 not found and no apt-get: install it, or Open3D (PLY output) will not import" >&2
+  fi
+fi
+
+# 2. Virtual environment.
+[ -x .venv/bin/python ] || "$PY" -m venv .venv
+VPY=.venv/bin/python
+$VPY -m pip install -q --upgrade pip >/dev/null 2>&1 || true
+
+# 3. torch 2.13.0, CPU build, before anything else.
+if ! $VPY -c 'import torch, sys; sys.exit(0 if torch.__version__.startswith("2.13.0") else 1)' 2>/dev/null; then
+  echo "[setup] installing torch==2.13.0 (CPU)"
+  if [ -n "${SOMTORCH_TORCH_INDEX:-}" ]; then
+    $VPY -m pip install -q "torch==2.13.0" --index-url "$SOMTORCH_TORCH_INDEX"
+  elif ls /opt/wheels/torch-2.13.0+cpu-*.whl >/dev/null 2>&1; then
+    $VPY -m pip install -q "torch==2.13.0" --find-links /opt/wheels
+  else
+    $VPY -m pip install -q "torch==2.13.0" --index-url https://download.pytorch.org/whl/cpu
+  fi
+fi
+
+# 4. The project and its other dependencies (torch already satisfies the range).
+echo "[setup] installing somtorch[$EXTRA]"
+$VPY -m pip install -q -e ".[$EXTRA]" 2>&1 | grep -v -E "^WARNING: Location|is ignored" || true
+$VPY -c 'import somtorch, torch; print(f"[setup] ok: somtorch {somtorch.__version__}, torch {torch.__version__}")'

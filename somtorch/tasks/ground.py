@@ -1,0 +1,145 @@
+"""Ground-plane detection in disparity space.
+
+For a pinhole stereo camera a plane of the scene is a plane in (x, y, d): ``d = a·x + b·y + c``. The
+supporting floor or road is the plane whose disparity grows towards the bottom of the image
+(``b > 0``: nearer at the bottom) and whose points fill the lower part of the image. It usually holds
+the largest disparities of the map, so the paper's "nearest area" rule picks it instead of the
+object standing on it. :func:`fit_ground_plane` finds it with RANSAC on a subsample of the lower
+image half and refines it by least squares on the inliers; a plane that does not look like ground
+(too flat in y, tilted more in x than in y, or too few inliers) is rejected and None returned.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from ..validation import check_positive, check_positive_int, check_tensor
+
+
+@dataclass
+class GroundConfig:
+    """Parameters of the ground-plane search.
+
+    Attributes:
+        enabled: look for a ground plane at all.
+        tol_frac: inlier band half-width as a fraction of the map's disparity range (1st–99th
+            percentile) …
+        tol_px: … but at least this many px.
+        min_inlier_frac: a plane needs this share of the valid pixels.
+        min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
+            of the disparity range (a fronto-parallel wall has b ≈ 0).
+        max_top_frac: a plane covering more than this share of the valid pixels of the top third
+            of the image is not ground (a wall or a slanted object).
+        iterations: RANSAC hypotheses.
+        sample: pixels drawn for RANSAC.
+        seed: RANSAC seed (the result does not depend on the SOM seed).
+    """
+
+    enabled: bool = True
+    tol_frac: float = 0.02
+    tol_px: float = 0.5
+    min_inlier_frac: float = 0.08
+    min_slope_frac: float = 0.25
+    max_top_frac: float = 0.15
+    iterations: int = 300
+    sample: int = 20000
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        check_positive("tol_frac", self.tol_frac, allow_zero=True)
+        check_positive("tol_px", self.tol_px, allow_zero=True)
+        check_positive("min_inlier_frac", self.min_inlier_frac)
+        check_positive("min_slope_frac", self.min_slope_frac, allow_zero=True)
+        check_positive_int("iterations", self.iterations)
+        check_positive_int("sample", self.sample)
+
+
+@dataclass
+class GroundPlane:
+    """A fitted ground plane ``d = a·x + b·y + c`` and its inlier mask ``(H, W)``."""
+
+    a: float
+    b: float
+    c: float
+    tol: float
+    mask: torch.Tensor
+    inlier_frac: float
+
+    def disparity(self, h: int, w: int) -> torch.Tensor:
+        """The plane's disparity at every pixel ``(H, W)``."""
+        ys = torch.arange(h, dtype=torch.float64)[:, None]
+        xs = torch.arange(w, dtype=torch.float64)[None, :]
+        return (self.a * xs + self.b * ys + self.c).float()
+
+    def as_dict(self) -> dict:
+        return {"a": self.a, "b": self.b, "c": self.c, "tol": self.tol, "inlier_frac": self.inlier_frac}
+
+
+def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundConfig | None = None) -> GroundPlane | None:
+    """Find the ground plane of a disparity map, or None if there is none (see the module docstring).
+
+    Shape:
+        ``disparity``, ``valid``: ``(H, W)``.
+    """
+    cfg = cfg or GroundConfig()
+    check_tensor("disparity", disparity, ndim=2, floating=True)
+    check_tensor("valid", valid, ndim=2, dtype=torch.bool)
+    if not cfg.enabled:
+        return None
+    h, w = disparity.shape
+    ok = valid & torch.isfinite(disparity)
+    n_valid = int(ok.sum())
+    if n_valid < 10:
+        return None
+    dv = disparity[ok].double()
+    if dv.numel() > 200_000:
+        dv = dv[torch.randint(dv.numel(), (200_000,), generator=torch.Generator().manual_seed(cfg.seed))]
+    q = torch.quantile(dv, torch.tensor([0.01, 0.99], dtype=torch.float64))
+    span = max(float(q[1] - q[0]), 1e-9)  # robust disparity range (outliers of SGBM maps ignored)
+    tol = max(cfg.tol_px, cfg.tol_frac * span)
+    g = torch.Generator().manual_seed(cfg.seed)
+    lower = ok.clone()
+    lower[: h // 2] = False
+    yx = lower.nonzero()
+    if yx.shape[0] < 10:
+        return None
+    pick = yx[torch.randint(yx.shape[0], (min(cfg.sample, yx.shape[0]),), generator=g)]
+    pts = torch.stack([pick[:, 1].double(), pick[:, 0].double(), disparity[pick[:, 0], pick[:, 1]].double()], 1)
+    # RANSAC: all hypotheses at once
+    tri = torch.randint(pts.shape[0], (cfg.iterations, 3), generator=g)
+    p = pts[tri]  # (I, 3, 3) rows (x, y, d)
+    A = torch.cat([p[..., :2], torch.ones_like(p[..., :1])], -1)  # (I, 3, 3)
+    det = torch.linalg.det(A)
+    good = det.abs() > 1e-6
+    if not bool(good.any()):
+        return None
+    coef = torch.zeros(cfg.iterations, 3, dtype=torch.float64)
+    coef[good] = torch.linalg.solve(A[good], p[good][..., 2:]).squeeze(-1)  # (a, b, c)
+    min_b = cfg.min_slope_frac * span / h
+    plausible = good & (coef[:, 1] >= min_b) & (coef[:, 0].abs() <= coef[:, 1] * w / h)
+    if not bool(plausible.any()):
+        return None
+    pred = coef[:, 0:1] * pts[None, :, 0] + coef[:, 1:2] * pts[None, :, 1] + coef[:, 2:3]
+    score = ((pred - pts[None, :, 2]).abs() < tol).sum(1).masked_fill(~plausible, -1)
+    best = coef[int(score.argmax())]
+    # refine by least squares on the inliers of the lower half, then recompute on the full map
+    inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
+    if int(inl.sum()) >= 3:
+        X = torch.cat([pts[inl, :2], torch.ones(int(inl.sum()), 1, dtype=torch.float64)], 1)
+        best = torch.linalg.lstsq(X, pts[inl, 2:]).solution.squeeze(-1)
+    a, b, c = (float(v) for v in best)
+    if b < min_b or abs(a) > b * w / h:
+        return None
+    ys = torch.arange(h, dtype=torch.float64)[:, None]
+    xs = torch.arange(w, dtype=torch.float64)[None, :]
+    mask = ok & ((a * xs + b * ys + c - disparity.double()).abs() < tol)
+    frac = int(mask.sum()) / n_valid
+    if frac < cfg.min_inlier_frac:
+        return None
+    # ground is seen below the objects, not above them: few inliers in the top third of the image
+    top = ok[: h // 3]
+    if int(top.sum()) and int(mask[: h // 3].sum()) / int(top.sum()) > cfg.max_top_frac:
+        return None
+    return GroundPlane(a, b, c, tol, mask, frac)

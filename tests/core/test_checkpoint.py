@@ -1,0 +1,91 @@
+"""safetensors checkpoints: round trips, the JSON sidecar, and files that are not checkpoints."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from safetensors.torch import save_file
+
+from somtorch import SOM, DataFileError
+
+
+@pytest.fixture
+def trained(x3) -> SOM:
+    return SOM(3, 4, 3, ensemble=2, toroidal=True, dtype=torch.float64, seed=7).fit(
+        x3.double(), mode="batch", epochs=3, progress=False)
+
+
+def test_round_trip_keeps_weights_config_seeds_and_dtype(trained, tmp_path):
+    path = trained.save(tmp_path / "som.safetensors")
+    assert path == tmp_path / "som.safetensors"
+    back = SOM.load(path, device="cpu")
+    assert back.weight.dtype == torch.float64
+    assert torch.equal(back.weight, trained.weight)
+    assert back.config() == trained.config()
+    assert back.seeds == [7, 8] and back.toroidal and back.initialized
+    assert torch.equal(back.adjacency, trained.adjacency)
+
+
+def test_suffix_is_added_and_json_sidecar_describes_the_map(trained, tmp_path):
+    path = trained.save(tmp_path / "run1")
+    assert path.name == "run1.safetensors"
+    meta = json.loads((tmp_path / "run1.json").read_text())
+    assert meta["format"] == "somtorch.som/1"
+    assert {k: meta[k] for k in trained.config()} == trained.config()
+    # loading by the name without the suffix finds the same file
+    assert torch.equal(SOM.load(tmp_path / "run1").weight, trained.weight)
+
+
+def test_uninitialised_flag_survives(tmp_path):
+    som = SOM(2, 2, 2, seed=0)
+    back = SOM.load(som.save(tmp_path / "blank"))
+    assert not back.initialized and torch.equal(back.weight, som.weight)
+
+
+def test_loaded_map_trains_on_from_the_saved_weights(trained, tmp_path, x3):
+    back = SOM.load(trained.save(tmp_path / "m"))
+    # the loaded map is not re-initialised by fit: training starts from the saved weights
+    a = back.fit(x3.double(), mode="batch", epochs=1, progress=False)
+    b = trained.fit(x3.double(), mode="batch", epochs=1, progress=False)
+    assert torch.equal(a.weight, b.weight)
+
+
+def test_missing_file_is_file_not_found(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nothere"):
+        SOM.load(tmp_path / "nothere.safetensors")
+
+
+@pytest.mark.parametrize("content", [b"", b"hello, this is not a safetensors file", b"\xff" * 64])
+def test_garbage_is_data_file_error_naming_the_file(tmp_path, content):
+    path = tmp_path / "junk.safetensors"
+    path.write_bytes(content)
+    with pytest.raises(DataFileError, match="junk.safetensors") as info:
+        SOM.load(path)
+    assert info.value.path == path
+
+
+def test_foreign_safetensors_file_is_rejected(tmp_path):
+    path = tmp_path / "other.safetensors"
+    save_file({"weight": torch.zeros(1, 4, 2)}, str(path))  # right tensor name, no somtorch metadata
+    with pytest.raises(DataFileError, match="other.safetensors.*not a somtorch SOM checkpoint"):
+        SOM.load(path)
+    save_file({"w": torch.zeros(1, 4, 2)}, str(path), metadata={"format": "somtorch.som/1", "config": "{}"})
+    with pytest.raises(DataFileError, match="weight"):
+        SOM.load(path)
+
+
+def test_broken_config_is_data_file_error(tmp_path):
+    path = tmp_path / "broken.safetensors"
+    save_file({"weight": torch.zeros(1, 4, 2)}, str(path),
+              metadata={"format": "somtorch.som/1", "config": json.dumps({"rows": 2})})
+    with pytest.raises(DataFileError, match="broken.safetensors"):
+        SOM.load(path)
+
+
+def test_existing_file_with_another_suffix_is_data_file_error(tmp_path):
+    path = tmp_path / "model.pt"
+    path.write_bytes(b"PK\x03\x04 a torch zip pickle, not safetensors")
+    with pytest.raises(DataFileError, match="model.pt"):
+        SOM.load(path)

@@ -1,0 +1,126 @@
+"""The training engine's update rules and sample orders against naive re-implementations."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from somtorch import SOM
+from somtorch.core.grid import grid_sqdist
+from somtorch.core.neighborhood import bubble, gaussian
+from somtorch.core.training import Order, _blocks, accumulate, batch_target, online_block
+
+ROWS, COLS, D = 3, 4, 2
+K = ROWS * COLS
+
+
+@pytest.fixture
+def setup():
+    g = torch.Generator().manual_seed(9)
+    x = torch.rand(50, D, generator=g, dtype=torch.float64)
+    w = torch.rand(2, K, D, generator=g, dtype=torch.float64)
+    return x, w, grid_sqdist(ROWS, COLS, dtype=torch.float64)
+
+
+def _naive_online(w, xs, lr, sigma, d2, h_fn):
+    w = w.clone()
+    for t in range(xs.shape[0]):
+        for e in range(w.shape[0]):
+            c = int(((xs[t] - w[e]) ** 2).sum(-1).argmin())
+            h = h_fn(d2[c], sigma[t, e]) * lr[t, e]
+            w[e] += h[:, None] * (xs[t] - w[e])
+    return w
+
+
+@pytest.mark.parametrize("h_fn", [gaussian, bubble], ids=["gaussian", "bubble"])
+@pytest.mark.parametrize("members", [1, 2])
+def test_online_rule_equals_kohonen_formula(setup, h_fn, members):
+    x, w, d2 = setup
+    w = w[:members]
+    s = 30
+    lr = torch.linspace(0.5, 0.1, s, dtype=torch.float64)[:, None].expand(s, members).contiguous()
+    sigma = torch.linspace(2.0, 0.5, s, dtype=torch.float64)[:, None].expand(s, members).contiguous()
+    got = w.clone()
+    online_block(got, x[:s][None], lr, sigma, d2, h_fn)
+    assert torch.allclose(got, _naive_online(w, x[:s], lr, sigma, d2, h_fn), atol=1e-12)
+
+
+def test_accumulate_counts_and_sums(setup):
+    x, w, _ = setup
+    sums, counts = accumulate(x, w, chunk_elements=5)
+    bmu = torch.cdist(x.expand(2, -1, -1), w).argmin(-1)
+    for e in range(2):
+        for k in range(K):
+            mask = bmu[e] == k
+            assert int(counts[e, k]) == int(mask.sum())
+            assert torch.allclose(sums[e, k], x[mask].sum(0), atol=1e-12)
+    assert torch.equal(counts.sum(-1), torch.full((2,), 50.0, dtype=torch.float64))
+
+
+def test_batch_target_is_neighbourhood_weighted_mean(setup):
+    x, w, d2 = setup
+    sigma = torch.tensor([0.7, 1.5], dtype=torch.float64)
+    sums, counts = accumulate(x, w)
+    target, den = batch_target(sums, counts, sigma, d2, gaussian)
+    bmu = torch.cdist(x.expand(2, -1, -1), w).argmin(-1)
+    for e in range(2):
+        h = gaussian(d2[bmu[e]], sigma[e])  # (N, K): h_{c(n) k}
+        want = (h.T @ x) / h.sum(0)[:, None]
+        assert torch.allclose(target[e], want, atol=1e-12)
+        assert torch.allclose(den[e], h.sum(0), atol=1e-12)
+
+
+def test_batch_mode_one_epoch_is_one_batch_map_step(setup):
+    x, w, d2 = setup
+    som = SOM(ROWS, COLS, D, ensemble=2, dtype=torch.float64, seed=0)
+    som.weight = w
+    som.fit(x, mode="batch", epochs=1, sigma=1.2, progress=False)
+    bmu = torch.cdist(x.expand(2, -1, -1), w).argmin(-1)
+    for e in range(2):
+        h = gaussian(d2[bmu[e]], torch.tensor(1.2, dtype=torch.float64))
+        assert torch.allclose(som.weight[e], (h.T @ x) / h.sum(0)[:, None], atol=1e-12)
+
+
+def test_units_no_sample_reaches_keep_their_weights():
+    x = torch.tensor([[0.0, 0.0], [0.1, 0.0]], dtype=torch.float64)
+    som = SOM(1, 5, 2, dtype=torch.float64, seed=0)
+    w0 = torch.tensor([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0], [4.0, 0.0]], dtype=torch.float64)
+    som.weight = w0
+    som.fit(x, mode="batch", epochs=1, sigma=0.5, neighborhood="bubble", progress=False)
+    assert torch.allclose(som.weight[0, 0], x.mean(0))  # the winner moves to its samples' mean
+    assert torch.equal(som.weight[0, 1:], w0[1:])  # the others are out of the bubble: untouched
+
+
+def test_minibatch_of_all_data_with_unit_rate_equals_batch(setup):
+    x, w, _ = setup
+    kw = {"epochs": 4, "sigma": 1.5, "progress": False}
+    a = SOM(ROWS, COLS, D, dtype=torch.float64, seed=0)
+    a.weight = w[0]
+    a.fit(x, mode="batch", **kw)
+    b = SOM(ROWS, COLS, D, dtype=torch.float64, seed=0)
+    b.weight = w[0]
+    b.fit(x, mode="minibatch", batch_size=x.shape[0], lr=1.0, lr_decay="constant", order="sequential", **kw)
+    assert torch.allclose(a.weight, b.weight, atol=1e-12)
+
+
+def test_random_order_is_a_fresh_permutation_per_epoch_and_member():
+    gens = [torch.Generator().manual_seed(s) for s in (0, 1)]
+    order = Order("random", 10, 2, gens, torch.device("cpu"))
+    idx = torch.cat([order.indices(0, 7), order.indices(7, 20), order.indices(20, 30)], dim=1)  # (2, 30)
+    assert idx.shape == (2, 30)
+    for e in range(2):
+        for ep in range(3):
+            assert sorted(idx[e, ep * 10:(ep + 1) * 10].tolist()) == list(range(10))
+        assert not torch.equal(idx[e, :10], idx[e, 10:20])
+    assert not torch.equal(idx[0], idx[1])
+    seq = Order("sequential", 10, 2, gens, torch.device("cpu")).indices(5, 25)
+    assert seq.shape == (1, 20) and torch.equal(seq[0], torch.arange(5, 25) % 10)
+
+
+def test_blocks_cover_all_steps_and_cut_at_callback_multiples():
+    blocks = list(_blocks(23, 10, 4))
+    assert blocks[0][0] == 0 and blocks[-1][1] == 23
+    assert all(a[1] == b[0] for a, b in zip(blocks, blocks[1:]))
+    stops = {b for _, b in blocks}
+    assert {4, 8, 12, 16, 20, 10, 20, 23} <= stops
+    assert all(b - a <= 10 for a, b in blocks)

@@ -1,0 +1,111 @@
+"""Every Hydra config composes against the typed schema; typos and wrong types fail before any work."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.errors import ConfigCompositionException
+from omegaconf import OmegaConf
+from omegaconf.errors import ConfigAttributeError, MissingMandatoryValue, ValidationError
+
+from experiments.schema import RunConfig, register
+from somtorch.outputs import OutputConfig
+from somtorch.pipeline import FeatureConfig, ReductionConfig, SOMConfig, TrainConfig
+from somtorch.tasks.objects import AreaConfig
+
+CONF = Path(__file__).resolve().parents[2] / "conf"
+SCHEMAS = {"features": FeatureConfig, "som": SOMConfig, "train": TrainConfig, "objects": AreaConfig,
+           "reduction": ReductionConfig, "output": OutputConfig}
+# data configs whose mandatory ??? values must come from the command line, and values that fill them
+MANDATORY = {"file": ["data.source=/tmp/disp.pfm"], "stereo_pair": ["data.left=l.png", "data.right=r.png"]}
+
+register()
+
+
+def _options() -> list[tuple[str, str]]:
+    return sorted((p.parent.name, p.stem) for p in CONF.glob("*/*.yaml") if p.parent.name != "experiment")
+
+
+def _experiments() -> list:
+    names = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml"))
+    return names or [pytest.param(None, marks=pytest.mark.skip(reason="conf/experiment/ holds no study yet"))]
+
+
+def _compose(overrides: list[str]):
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return compose(config_name="run", overrides=overrides)
+
+
+def test_every_group_has_options():
+    groups = {g for g, _ in _options()}
+    assert {"data", "features", "som", "train", "objects", "reduction", "output", "paths"} <= groups
+
+
+@pytest.mark.parametrize("group, option", _options(), ids=[f"{g}={o}" for g, o in _options()])
+def test_every_group_option_composes_and_validates(group, option):
+    extra = MANDATORY.get(option, []) if group == "data" else []
+    cfg = _compose([f"{group}={option}", *extra])
+    obj = OmegaConf.to_object(cfg)
+    assert isinstance(obj, RunConfig)
+    if group in SCHEMAS:
+        assert isinstance(getattr(obj, group), SCHEMAS[group])
+    # every literal value of the option's file arrives in the composed config
+    raw = OmegaConf.to_container(OmegaConf.load(CONF / group / f"{option}.yaml"), resolve=False)
+    for key, value in raw.items():
+        if value == "???" or (isinstance(value, str) and "${" in value):
+            continue
+        assert OmegaConf.to_container(cfg[group], resolve=True)[key] == value, f"{group}.{key}"
+    for override in extra:
+        key, value = override.split("=", 1)
+        assert OmegaConf.select(cfg, key) == value
+
+
+@pytest.mark.parametrize("name", _experiments())
+def test_every_experiment_composes_and_validates(name):
+    cfg = _compose([f"+experiment={name}"])
+    assert isinstance(OmegaConf.to_object(cfg), RunConfig)
+
+
+def test_shared_scene_paths_resolve_under_paths_data_dir(tmp_path):
+    cfg = _compose(["data=eth3d_terrace", f"paths.data_dir={tmp_path}"])
+    assert OmegaConf.to_object(cfg).data.source == f"{tmp_path}/eth3d/terrace"
+
+
+def test_data_file_without_a_source_is_missing():
+    cfg = _compose(["data=file"])
+    with pytest.raises(MissingMandatoryValue, match="source"):
+        OmegaConf.to_object(cfg)
+
+
+def test_stereo_pair_without_a_left_image_is_missing():
+    cfg = _compose(["data=stereo_pair", "data.right=r.png"])
+    with pytest.raises(MissingMandatoryValue, match="left"):
+        OmegaConf.to_object(cfg)
+
+
+# ----------------------------------------------------------------- typos and wrong types fail early
+
+
+@pytest.mark.parametrize("override, names", [
+    ("train.epochs=abc", "epochs"),
+    ("objects.selectt=1", "selectt"),
+    ("som.rowz=3", "rowz"),
+    ("ensemble=two", "ensemble"),
+    ("objects.select=bogus", "bogus"),
+    ("objects.connectivity=6", "connectivity"),
+    ("objects.max_area_frac=2.0", "max_area_frac"),
+])
+def test_typos_wrong_types_and_bad_values_fail_at_composition(override, names):
+    errors = (ConfigCompositionException, ValidationError, ConfigAttributeError, ValueError)
+    with pytest.raises(errors) as info:
+        OmegaConf.to_object(_compose([override]))
+    chain = f"{info.value} {info.value.__cause__}"
+    assert names in chain
+
+
+@pytest.mark.parametrize("override", ["som.rows=0"])
+def test_bad_som_values_fail_at_composition(override):
+    with pytest.raises(ValueError, match="rows"):
+        OmegaConf.to_object(_compose([override]))

@@ -1,0 +1,165 @@
+"""``python -m experiments.run`` end to end, as a real subprocess writing real files."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from somtorch import SOM
+from somtorch.disparity.io import write_pfm
+from somtorch.disparity.scene import load_scene
+from somtorch.geometry import read_ply
+
+ROOT = Path(__file__).resolve().parents[2]
+MAPS = ("disparity", "segments_grey", "segments_color", "reference_vectors", "areas", "reduced_disparity")
+OURS = (".json", ".png", ".ply", ".npz", ".safetensors")  # file types a run writes besides Hydra's
+
+pytestmark = pytest.mark.slow
+
+
+def _run(run_dir: Path, *overrides: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    env.pop("HYDRA_FULL_ERROR", None)
+    return subprocess.run([sys.executable, "-m", "experiments.run", f"hydra.run.dir={run_dir}",
+                           "output.render_backend=matplotlib", *overrides],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+
+
+def _ok(proc: subprocess.CompletedProcess) -> None:
+    assert proc.returncode == 0, f"exit {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+
+
+def _strict_json(path: Path) -> dict:
+    def reject(c):
+        raise ValueError(f"{path}: non-standard JSON constant {c}")
+    return json.loads(path.read_text(), parse_constant=reject)
+
+
+def _our_files(run_dir: Path) -> list[str]:
+    return sorted(str(p.relative_to(run_dir)) for p in run_dir.rglob("*")
+                  if p.is_file() and (p.suffix in OURS or p.name.startswith("events.out.tfevents"))
+                  and ".hydra" not in p.parts)
+
+
+def _no_temp_files(run_dir: Path) -> None:
+    assert not [p for p in run_dir.rglob(".*.tmp*")], "temporary files left behind"
+
+
+# ------------------------------------------------------------------------------------ full run
+
+
+@pytest.fixture(scope="module")
+def embedded_run(tmp_path_factory) -> Path:
+    run_dir = tmp_path_factory.mktemp("run") / "motorcycle"
+    # objects=paper ("nearest") always keeps an area, so the reduced cloud is written too
+    _ok(_run(run_dir, "objects=paper", "ensemble=2", "train.epochs=4"))
+    return run_dir
+
+
+def test_metrics_json_is_complete(embedded_run):
+    m = _strict_json(embedded_run / "metrics.json")
+    scene = load_scene("motorcycle")
+    assert m["scene"]["name"] == "motorcycle" and m["scene"]["valid_pixels"] == scene.n_valid
+    assert {"features", "train", "segment", "objects", "reduction", "total"} <= set(m["timings_s"])
+    assert all(v >= 0 for v in m["timings_s"].values())
+    assert len(m["members"]) == 2 and [mem["seed"] for mem in m["members"]] == [0, 1]
+    assert all(len(mem["kept_areas"]) == 1 for mem in m["members"])
+    assert m["config"]["ensemble"] == 2 and m["config"]["objects"]["select"] == "nearest"
+    pc = m["pointcloud"]
+    assert pc["written"] is True and pc["points_full"] == scene.n_valid
+    with np.load(embedded_run / "reduced.npz") as z:
+        assert pc["points_reduced"] == int(z["valid"].sum()) > 0
+    _no_temp_files(embedded_run)
+
+
+def test_pictures_and_point_clouds_are_readable(embedded_run):
+    scene = load_scene("motorcycle")
+    for name in MAPS:
+        img = cv2.imread(str(embedded_run / f"{name}.png"))
+        assert img is not None and img.shape == (scene.height, scene.width, 3), name
+    assert cv2.imread(str(embedded_run / "cloud_reduced.png")) is not None
+    m = _strict_json(embedded_run / "metrics.json")
+    assert len(read_ply(embedded_run / "cloud_full.ply")) == m["pointcloud"]["points_full"]
+    assert len(read_ply(embedded_run / "cloud_reduced.ply")) == m["pointcloud"]["points_reduced"]
+
+
+def test_checkpoint_loads_as_the_trained_som(embedded_run):
+    som = SOM.load(embedded_run / "som.safetensors")
+    assert (som.rows, som.cols, som.dim, som.ensemble) == (4, 7, 3, 2)
+    assert som.seeds == [0, 1]
+    assert som.weight.shape == (2, 28, 3)
+    assert bool(som.weight.isfinite().all())
+
+
+def test_tensorboard_events_hold_the_training_curve(embedded_run):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(embedded_run / "tb"))
+    acc.Reload()
+    scalars = acc.Tags()["scalars"]
+    assert {"train/quantization_error", "train/topographic_error"} <= set(scalars)
+    qe = acc.Scalars("train/quantization_error")
+    assert len(qe) == 4  # one per epoch
+    assert all(np.isfinite(e.value) and e.value >= 0 for e in qe)
+    assert {"maps/disparity", "maps/areas"} <= set(acc.Tags()["images"])
+
+
+def test_a_shared_scene_with_a_mask_gets_a_summary(tmp_path, shared_data):
+    run_dir = tmp_path / "terrace"
+    _ok(_run(run_dir, "data=eth3d_terrace", f"paths.data_dir={shared_data}", "ensemble=3",
+             "output.pointcloud=false", "output.tensorboard=false"))
+    m = _strict_json(run_dir / "metrics.json")
+    s = m["summary"]
+    assert s["runs"] == 3
+    scores = [mem["score"] for mem in m["members"]]
+    assert s["identified_100"] == sum(sc["identified_100"] for sc in scores)
+    assert s["identified_95"] == sum(sc["identified_95"] for sc in scores)
+    assert 0 <= s["identified_100"] <= s["identified_95"] <= 3
+    assert s["x_opt"] == pytest.approx(94.3, abs=0.05)
+    assert "pointcloud" not in m and not (run_dir / "tb").exists() and not list(run_dir.glob("*.ply"))
+
+
+# ------------------------------------------------------------------- bad input leaves nothing of ours
+
+
+def _truncated_pfm(path: Path) -> Path:
+    write_pfm(path, np.ones((40, 60), np.float32))
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    return path
+
+
+def _all_invalid_npy(path: Path) -> Path:
+    np.save(path, np.full((30, 40), np.nan, np.float32))
+    return path
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: d / "missing.pfm", "missing.pfm"),
+    (lambda d: _truncated_pfm(d / "short.pfm"), "short.pfm"),
+    (lambda d: _all_invalid_npy(d / "empty.npy"), "empty.npy"),
+], ids=["missing", "truncated_pfm", "all_invalid_npy"])
+def test_bad_input_fails_and_leaves_no_output(tmp_path, make, message):
+    source = make(tmp_path)
+    run_dir = tmp_path / "run"
+    proc = _run(run_dir, "data=file", f"data.source={source}")
+    assert proc.returncode != 0
+    log = (run_dir / "run.log").read_text() if (run_dir / "run.log").exists() else ""
+    assert message in proc.stderr + log, proc.stderr[-2000:]
+    assert _our_files(run_dir) == []
+    assert not (run_dir / "tb").exists()
+    assert {p.name for p in run_dir.iterdir()} <= {".hydra", "run.log"}
+
+
+def test_bad_som_value_fails_and_leaves_no_output(tmp_path):
+    run_dir = tmp_path / "run"
+    proc = _run(run_dir, "som.rows=0")
+    assert proc.returncode != 0 and "rows" in proc.stderr
+    assert _our_files(run_dir) == []
