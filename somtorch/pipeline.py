@@ -43,7 +43,7 @@ class FeatureConfig:
     """
 
     normalize: str = "image"
-    d_weight: float = 1.0
+    d_weight: float = 2.0
     train_stride: int = 10
     speckle_frac: float = 0.0  # remove_speckles max_size_frac (0 = off; for computed SGBM maps)
 
@@ -56,8 +56,8 @@ class FeatureConfig:
 
 @dataclass
 class SOMConfig:
-    rows: int = 4
-    cols: int = 7
+    rows: int = 8
+    cols: int = 8
     topology: str = "rectangular"
     toroidal: bool = False
     init: str = "random"
@@ -73,7 +73,7 @@ class SOMConfig:
 class TrainConfig:
     """SOM training (paper step 1 b); arguments of :meth:`somtorch.SOM.fit`."""
 
-    mode: str = "online"
+    mode: str = "batch"
     epochs: int = 10
     lr: float = 0.5
     sigma: float | None = None

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from somtorch.disparity.scene import load_scene
-from somtorch.pipeline import PipelineConfig, TrainConfig, run_pipeline
+from somtorch.pipeline import PipelineConfig, SOMConfig, TrainConfig, run_pipeline
 from somtorch.tasks.reduction import reduce_map
 from somtorch.tasks.scoring import Score
 
@@ -17,7 +17,8 @@ STAGES = {"features", "train", "segment", "objects", "reduction"}
 
 
 def _cfg(ensemble: int = E, seed: int = SEED) -> PipelineConfig:
-    return PipelineConfig(train=TrainConfig(mode="batch", epochs=EPOCHS), ensemble=ensemble, seed=seed)
+    return PipelineConfig(som=SOMConfig(rows=4, cols=7), train=TrainConfig(mode="batch", epochs=EPOCHS),
+                          ensemble=ensemble, seed=seed)
 
 
 @pytest.fixture(scope="module")

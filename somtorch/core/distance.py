@@ -39,7 +39,17 @@ def bmu_search(x: torch.Tensor, weight: torch.Tensor, *, k: int = 1,
 
     Shape:
         returns ``(E, N)`` for k = 1, else ``(E, N, k)``; dtype long.
+
+    On the CPU, k = 1 and k = 2 use the fused kernel of :mod:`somtorch.core.native` when it is
+    available (exact squared distances ``Σ_d (x_d − w_d)²``, no score matrix); elsewhere, or with
+    ``SOMTORCH_NATIVE=0``, the chunked ``‖w‖² − 2 x·w`` expansion below.
     """
+    from .native import native_bmu
+
+    if k in (1, 2):
+        fused = native_bmu(x, weight, k=k)
+        if fused is not None:
+            return fused
     e, kk, _ = weight.shape
     n = x.shape[-2]
     wsq = weight.square().sum(-1)  # (E, K)

@@ -36,6 +36,10 @@ SPREADS = ("range", "robust")
 class AreaConfig:
     """Parameters of object-area recognition (see the module docstring).
 
+    The defaults are the ``robust`` preset (segments merge across image-space boundaries, robust
+    spread, salient selection); ``conf/objects/paper.yaml`` holds the paper's literal rule
+    (``link="grid"``, ``spread="range"``, ``similarity=0.1``, ``select="nearest"``).
+
     Attributes:
         similarity: two linked neurons are similar if their reference disparities differ by
             less than ``similarity × spread`` of the map.
@@ -59,10 +63,10 @@ class AreaConfig:
         max_area_frac, min_area_frac: size limits as fractions of the valid pixels.
     """
 
-    similarity: float = 0.1
+    similarity: float = 0.05
     connectivity: int = 4
-    link: str = "grid"
-    spread: str = "range"
+    link: str = "image"
+    spread: str = "robust"
     min_boundary: float = 0.1
     size_power: float = 0.0
     grow: bool = False
@@ -71,7 +75,7 @@ class AreaConfig:
     max_areas: int = 1
     min_contrast: float = 0.02
     max_area_frac: float = 0.5
-    min_area_frac: float = 0.002
+    min_area_frac: float = 0.01
 
     def __post_init__(self) -> None:
         check_positive("similarity", self.similarity)

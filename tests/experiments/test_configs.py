@@ -46,6 +46,10 @@ def test_every_group_has_options():
 @pytest.mark.parametrize("group, option", _options(), ids=[f"{g}={o}" for g, o in _options()])
 def test_every_group_option_composes_and_validates(group, option):
     extra = MANDATORY.get(option, []) if group == "data" else []
+    if group == "preset":  # presets are not in the defaults list: appended with +preset=NAME
+        cfg = _compose([f"+preset={option}"])
+        assert isinstance(OmegaConf.to_object(cfg), RunConfig)
+        return
     cfg = _compose([f"{group}={option}", *extra])
     obj = OmegaConf.to_object(cfg)
     assert isinstance(obj, RunConfig)

@@ -92,9 +92,10 @@ def test_pictures_and_point_clouds_are_readable(embedded_run):
 
 def test_checkpoint_loads_as_the_trained_som(embedded_run):
     som = SOM.load(embedded_run / "som.safetensors")
-    assert (som.rows, som.cols, som.dim, som.ensemble) == (4, 7, 3, 2)
+    grid = _strict_json(embedded_run / "metrics.json")["config"]["som"]
+    assert (som.rows, som.cols, som.dim, som.ensemble) == (grid["rows"], grid["cols"], 3, 2)
     assert som.seeds == [0, 1]
-    assert som.weight.shape == (2, 28, 3)
+    assert som.weight.shape == (2, grid["rows"] * grid["cols"], 3)
     assert bool(som.weight.isfinite().all())
 
 

@@ -16,7 +16,9 @@ from somtorch.tasks.objects import AreaConfig, find_object_areas, neuron_stats, 
 
 ROWS, COLS, B = 4, 7, 5
 # conf/objects/paper.yaml: keep the nearest area, no size or contrast limits
-PAPER = dict(select="nearest", min_contrast=0.0, max_area_frac=1.0, min_area_frac=0.0)
+# the paper preset (conf/objects/paper.yaml): grid links, full-range spread, 10 % similarity, nearest area
+PAPER = dict(select="nearest", min_contrast=0.0, max_area_frac=1.0, min_area_frac=0.0, link="grid", spread="range",
+             similarity=0.1)
 
 
 def _block_map(ref: torch.Tensor, rows: int = ROWS, cols: int = COLS, b: int = B
@@ -69,7 +71,7 @@ def test_similarity_threshold_is_a_fraction_of_the_disparity_range():
     ref[0], ref[1] = 50.0, 47.0  # |Δ| = 3 against a range of 40
 
     def near(similarity: float):
-        return next(a for a in _areas(ref, AreaConfig(similarity=similarity, **PAPER))[0] if 0 in a.neurons)
+        return next(a for a in _areas(ref, AreaConfig(**{**PAPER, "similarity": similarity}))[0] if 0 in a.neurons)
 
     assert set(near(0.1).neurons) == {0, 1}  # 3 < 0.1 · 40
     assert set(near(0.05).neurons) == {0}  # 3 ≥ 0.05 · 40

@@ -1,0 +1,203 @@
+// Fused best-matching-unit search for somtorch (see somtorch/core/native.py).
+//
+// For every member e and sample n: the index of the smallest exact squared distance
+//     dist(n, k) = (x_0 - w_k0)^2 + (x_1 - w_k1)^2 + ... + (x_{D-1} - w_k,D-1)^2
+// summed left to right in the input precision, first index on ties (like torch.argmin); with
+// top2 also the second smallest (ties again by index). No N x E x K score matrix is ever held.
+//
+// Vectorised over samples: a tile holds U vectors of W samples (transposed to feature-major),
+// every neuron's features are broadcast and each lane keeps its own running minimum, so no
+// horizontal reduction is needed. Built with -ffp-contract=off: every lane performs the same
+// IEEE operations in the same order as the scalar formula above, hence the result of a sample
+// does not depend on its lane, tile, thread, the number of threads, or the other members.
+//
+// Plain C ABI (called through ctypes); no torch headers, so it builds in about a second.
+// OpenMP comes from the libgomp that torch has already loaded (same soname), so it shares
+// torch's thread pool.
+
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+namespace {
+
+typedef float f32x8 __attribute__((vector_size(32)));
+typedef int32_t i32x8 __attribute__((vector_size(32)));
+typedef double f64x4 __attribute__((vector_size(32)));
+typedef int64_t i64x4 __attribute__((vector_size(32)));
+
+template <typename T> struct Lanes;
+template <> struct Lanes<float> {
+  typedef f32x8 V;
+  typedef i32x8 I;
+  typedef int32_t Idx;
+  static constexpr int W = 8;
+};
+template <> struct Lanes<double> {
+  typedef f64x4 V;
+  typedef i64x4 I;
+  typedef int64_t Idx;
+  static constexpr int W = 4;
+};
+
+constexpr int U = 2;  // vectors per tile (independent dependency chains)
+
+// One tile (U*W samples, feature-major in xs[d * TW + lane]) against one member's weights
+// w (K, D). DC > 0: D known at compile time (registers); DC == 0: runtime D (loads from L1).
+template <typename T, int DC, bool TOP2>
+inline void tile(const T* __restrict xs, const T* __restrict w, int64_t K, int64_t D,
+                 typename Lanes<T>::Idx* __restrict i1_out,
+                 typename Lanes<T>::Idx* __restrict i2_out) {
+  typedef typename Lanes<T>::V V;
+  typedef typename Lanes<T>::I I;
+  constexpr int W = Lanes<T>::W;
+  constexpr int TW = U * W;
+  const T inf = std::numeric_limits<T>::infinity();
+  V b1[U], b2[U];
+  I i1[U], i2[U];
+  for (int u = 0; u < U; ++u) {
+    b1[u] = V{} + inf;
+    b2[u] = V{} + inf;
+    i1[u] = I{};
+    i2[u] = I{};
+  }
+  V xr[U][DC > 0 ? DC : 1];
+  if (DC > 0) {
+    for (int u = 0; u < U; ++u)
+      for (int d = 0; d < DC; ++d) std::memcpy(&xr[u][d], xs + d * TW + u * W, sizeof(V));
+  }
+  for (int64_t k = 0; k < K; ++k) {
+    const T* wk = w + k * (DC > 0 ? DC : D);
+    const I kv = I{} + (typename Lanes<T>::Idx)k;
+    for (int u = 0; u < U; ++u) {
+      V acc;
+      if (DC > 0) {
+        V t = xr[u][0] - wk[0];
+        acc = t * t;
+        for (int d = 1; d < DC; ++d) {
+          t = xr[u][d] - wk[d];
+          acc = acc + t * t;
+        }
+      } else {
+        V xv;
+        std::memcpy(&xv, xs + u * W, sizeof(V));
+        V t = xv - wk[0];
+        acc = t * t;
+        for (int64_t d = 1; d < D; ++d) {
+          std::memcpy(&xv, xs + d * TW + u * W, sizeof(V));
+          t = xv - wk[d];
+          acc = acc + t * t;
+        }
+      }
+      const I m1 = acc < b1[u];
+      if (TOP2) {
+        const I m2 = acc < b2[u];
+        b2[u] = m1 ? b1[u] : (m2 ? acc : b2[u]);
+        i2[u] = m1 ? i1[u] : (m2 ? kv : i2[u]);
+      }
+      b1[u] = m1 ? acc : b1[u];
+      i1[u] = m1 ? kv : i1[u];
+    }
+  }
+  for (int u = 0; u < U; ++u) {
+    std::memcpy(i1_out + u * W, &i1[u], sizeof(I));
+    if (TOP2) std::memcpy(i2_out + u * W, &i2[u], sizeof(I));
+  }
+}
+
+// x: (N, D) shared (x_stride == 0) or (E, N, D) with x_stride == N * D; w: (E, K, D);
+// out: (E, N) int64, or (E, N, 2) when TOP2.
+template <typename T, int DC, bool TOP2>
+void run(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t K, int64_t D,
+         int64_t* out, int nthreads) {
+  typedef typename Lanes<T>::Idx Idx;
+  constexpr int TW = U * Lanes<T>::W;
+  const int64_t tiles = (N + TW - 1) / TW;
+  const bool shared = x_stride == 0;
+  const int64_t items = shared ? tiles : E * tiles;  // shared x: an item is one tile, all members
+  const double work = (double)E * (double)N * (double)K * (double)D;
+  if (nthreads < 1 || work < 262144.0) nthreads = 1;  // a fork costs more than such a call
+  if (items < nthreads) nthreads = (int)items;
+#pragma omp parallel num_threads(nthreads) if (nthreads > 1)
+  {
+    std::vector<T> xs_buf((size_t)D * TW);
+    T* xs = xs_buf.data();
+    alignas(32) Idx i1[TW];
+    alignas(32) Idx i2[TW];
+#pragma omp for schedule(static)
+    for (int64_t item = 0; item < items; ++item) {
+      const int64_t e0 = shared ? 0 : item / tiles;
+      const int64_t t = shared ? item : item % tiles;
+      const int64_t n0 = t * TW;
+      const int64_t nv = N - n0 < TW ? N - n0 : TW;
+      const T* xe = x + e0 * x_stride + n0 * D;
+      for (int64_t j = 0; j < TW; ++j) {  // transpose; padded lanes repeat the last sample
+        const T* row = xe + (j < nv ? j : nv - 1) * D;
+        for (int64_t d = 0; d < D; ++d) xs[d * TW + j] = row[d];
+      }
+      const int64_t e_end = shared ? E : e0 + 1;
+      for (int64_t e = e0; e < e_end; ++e) {
+        tile<T, DC, TOP2>(xs, w + e * K * D, K, D, i1, i2);
+        if (TOP2) {
+          int64_t* o = out + (e * N + n0) * 2;
+          for (int64_t j = 0; j < nv; ++j) {
+            o[2 * j] = i1[j];
+            o[2 * j + 1] = i2[j];
+          }
+        } else {
+          int64_t* o = out + e * N + n0;
+          for (int64_t j = 0; j < nv; ++j) o[j] = i1[j];
+        }
+      }
+    }
+  }
+}
+
+template <typename T, bool TOP2>
+void dispatch_d(const T* x, int64_t xs, const T* w, int64_t E, int64_t N, int64_t K, int64_t D,
+                int64_t* out, int nt) {
+  switch (D) {
+    case 1: run<T, 1, TOP2>(x, xs, w, E, N, K, D, out, nt); break;
+    case 2: run<T, 2, TOP2>(x, xs, w, E, N, K, D, out, nt); break;
+    case 3: run<T, 3, TOP2>(x, xs, w, E, N, K, D, out, nt); break;
+    case 4: run<T, 4, TOP2>(x, xs, w, E, N, K, D, out, nt); break;
+    default: run<T, 0, TOP2>(x, xs, w, E, N, K, D, out, nt); break;
+  }
+}
+
+template <typename T>
+int entry(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t K, int64_t D,
+          int top, int64_t* out, int nthreads) {
+  if (E < 1 || N < 0 || K < 1 || D < 1 || (top != 1 && top != 2) || (top == 2 && K < 2)) return 1;
+  if (K > (int64_t)std::numeric_limits<typename Lanes<T>::Idx>::max()) return 1;
+  if (N == 0) return 0;
+  if (top == 2)
+    dispatch_d<T, true>(x, x_stride, w, E, N, K, D, out, nthreads);
+  else
+    dispatch_d<T, false>(x, x_stride, w, E, N, K, D, out, nthreads);
+  return 0;
+}
+
+}  // namespace
+
+extern "C" {
+
+// Version of this C ABI; native.py refuses a library that reports another one.
+int somtorch_bmu_abi(void) { return 1; }
+
+int somtorch_bmu_f32(const float* x, int64_t x_stride, const float* w, int64_t E, int64_t N,
+                     int64_t K, int64_t D, int top, int64_t* out, int nthreads) {
+  return entry<float>(x, x_stride, w, E, N, K, D, top, out, nthreads);
+}
+
+int somtorch_bmu_f64(const double* x, int64_t x_stride, const double* w, int64_t E, int64_t N,
+                     int64_t K, int64_t D, int top, int64_t* out, int nthreads) {
+  return entry<double>(x, x_stride, w, E, N, K, D, top, out, nthreads);
+}
+
+}  // extern "C"

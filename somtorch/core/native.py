@@ -1,0 +1,235 @@
+"""Fused native BMU search on the CPU (optional, built on first use).
+
+:func:`native_bmu` computes, for every member e and sample n, the argmin over the K neurons of the
+exact squared distance ``Σ_d (x_nd − w_ekd)²`` (summed left to right in the input precision; first
+index on ties, as ``torch.argmin``), and optionally the second-best neuron, without ever holding the
+``N × E × K`` score matrix. The kernel (``csrc/bmu.cpp``) is vectorised over samples and split over
+blocks of samples with OpenMP; every (e, n) is computed by the same operations whatever the thread
+count, the chunking or the ensemble size, so member e equals a solo map with that member's weights.
+
+The kernel is plain C++ with a C ABI (no torch headers, so it compiles in about a second), loaded
+with :mod:`ctypes`. It is compiled on the first call with the system C++ compiler (``$CXX`` or
+``c++``) into ``$SOMTORCH_CACHE_DIR`` (default ``$XDG_CACHE_HOME/somtorch/native`` or
+``~/.cache/somtorch/native``) under a name that hashes the source, the compiler and the flags; an
+``fcntl`` file lock keeps concurrent processes (pytest-xdist workers) from compiling twice, and the
+library is moved into place atomically. ``-mavx2 -mfma`` are used only when the CPU reports both.
+
+``native_bmu`` returns ``None`` whenever the kernel cannot serve the call — ``SOMTORCH_NATIVE=0``,
+no compiler or a failed build (logged once as a warning), non-CPU tensors, dtypes other than
+float32/float64, mixed dtypes, NaN weights — and callers then use the torch path.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import logging
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+import torch
+
+logger = logging.getLogger(__name__)
+
+ENV_SWITCH = "SOMTORCH_NATIVE"  # "0" disables the native kernel
+ENV_CACHE = "SOMTORCH_CACHE_DIR"
+SOURCE = Path(__file__).resolve().parent / "csrc" / "bmu.cpp"
+ABI = 1  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
+BASE_FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off")
+BUILD_TIMEOUT_S = 300
+
+_lock = threading.Lock()
+_lib: ctypes.CDLL | None = None
+_failed: str | None = None  # why the library is unavailable (set once)
+_noted: set[str] = set()
+
+
+def _note(reason: str, level: int = logging.DEBUG) -> None:
+    """Log each distinct reason for not using the kernel once."""
+    if reason not in _noted:
+        _noted.add(reason)
+        logger.log(level, "native BMU kernel not used: %s; using the torch path", reason)
+
+
+def cache_dir() -> Path:
+    """Where compiled kernels are kept."""
+    if os.environ.get(ENV_CACHE):
+        return Path(os.environ[ENV_CACHE])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "somtorch" / "native"
+
+
+def _cpu_flags() -> set[str]:
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
+def _compiler() -> str | None:
+    for name in (os.environ.get("CXX"), "c++", "g++", "clang++"):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def _compile(cxx: str, flags: list[str], target: Path) -> str | None:
+    """Compile SOURCE into ``target`` atomically; the compiler's message on failure, else None."""
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=target.stem + ".", suffix=".tmp.so")
+    os.close(fd)
+    try:
+        proc = subprocess.run([cxx, *flags, str(SOURCE), "-o", tmp], capture_output=True, text=True,
+                              timeout=BUILD_TIMEOUT_S)
+        if proc.returncode != 0:
+            return (proc.stderr or proc.stdout).strip()[-2000:] or f"exit status {proc.returncode}"
+        os.replace(tmp, target)
+        return None
+    except (OSError, subprocess.SubprocessError) as exc:
+        return str(exc)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _build() -> Path:
+    """Path of the compiled library for this source, compiler and CPU, building it if needed."""
+    cxx = _compiler()
+    if cxx is None:
+        raise RuntimeError("no C++ compiler found (set $CXX or install g++)")
+    try:
+        version = subprocess.run([cxx, "--version"], capture_output=True, text=True, timeout=60).stdout
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise RuntimeError(f"cannot run the C++ compiler {cxx}: {exc}") from exc
+    isa = ["-mavx2", "-mfma"] if {"avx2", "fma"} <= _cpu_flags() else []
+    variants = [[*BASE_FLAGS, *isa, "-fopenmp"], [*BASE_FLAGS, *isa]]  # without OpenMP: one thread
+    src = SOURCE.read_bytes()
+    folder = cache_dir()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        if not os.access(folder, os.W_OK):
+            raise PermissionError(f"{folder} is not writable")
+    except OSError:  # e.g. a read-only home: a per-user folder in the temporary directory
+        folder = Path(tempfile.gettempdir()) / f"somtorch-native-{os.getuid() if hasattr(os, 'getuid') else 0}"
+        folder.mkdir(parents=True, exist_ok=True)
+    errors = []
+    for flags in variants:
+        key = hashlib.sha256(b"\0".join([src, cxx.encode(), version.encode(), " ".join(flags).encode(),
+                                         sys.platform.encode()])).hexdigest()[:16]
+        target = folder / f"bmu-{key}.so"
+        if target.exists():
+            return target
+        with open(folder / f"bmu-{key}.lock", "w") as lock:
+            try:
+                import fcntl
+
+                fcntl.flock(lock, fcntl.LOCK_EX)  # another process may be compiling this one
+            except ImportError:  # no fcntl (Windows): the atomic replace alone keeps it correct
+                pass
+            if target.exists():
+                return target
+            err = _compile(cxx, flags, target)
+        if err is None:
+            if "-fopenmp" not in flags:
+                logger.warning("native BMU kernel built without OpenMP (single-threaded): %s",
+                               errors[-1][:300] if errors else "")
+            return target
+        errors.append(f"{cxx} {' '.join(flags)}: {err}")
+    raise RuntimeError("building csrc/bmu.cpp failed:\n" + "\n".join(errors))
+
+
+def _load() -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(_build()))
+    lib.somtorch_bmu_abi.restype = ctypes.c_int
+    if lib.somtorch_bmu_abi() != ABI:
+        raise RuntimeError(f"library reports ABI {lib.somtorch_bmu_abi()}, expected {ABI}")
+    p, i64, i32 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_int
+    for fn in (lib.somtorch_bmu_f32, lib.somtorch_bmu_f64):
+        # x, x_stride, w, E, N, K, D, top, out, nthreads
+        fn.argtypes = [p, i64, p, i64, i64, i64, i64, i32, p, i32]
+        fn.restype = ctypes.c_int
+    return lib
+
+
+def library() -> ctypes.CDLL | None:
+    """The loaded kernel library, building it on the first call; None if that is impossible."""
+    global _lib, _failed
+    if _lib is not None or _failed is not None:
+        return _lib
+    with _lock:
+        if _lib is None and _failed is None:
+            try:
+                _lib = _load()
+            except Exception as exc:  # any failure here only means "use the torch path"
+                _failed = f"{type(exc).__name__}: {exc}"
+                _note(f"the kernel is unavailable ({_failed})", logging.WARNING)
+    return _lib
+
+
+def enabled() -> bool:
+    """False when the environment variable ``SOMTORCH_NATIVE`` is ``0``."""
+    return os.environ.get(ENV_SWITCH, "1").strip() != "0"
+
+
+def available() -> bool:
+    """Whether the kernel is enabled and builds/loads on this machine."""
+    return enabled() and library() is not None
+
+
+def _unsupported(x: torch.Tensor, weight: torch.Tensor, k: int) -> str | None:
+    if x.device.type != "cpu" or weight.device.type != "cpu":
+        return f"tensors on {x.device}/{weight.device}, the kernel runs on the CPU only"
+    if x.dtype != weight.dtype or x.dtype not in (torch.float32, torch.float64):
+        return f"dtypes {x.dtype}/{weight.dtype}; the kernel needs both float32 or both float64"
+    if weight.ndim != 3 or x.ndim not in (2, 3) or x.shape[-1] != weight.shape[-1] \
+            or (x.ndim == 3 and x.shape[0] != weight.shape[0]):
+        return f"shapes x {tuple(x.shape)}, weight {tuple(weight.shape)}"
+    if k not in (1, 2) or weight.shape[1] < k or weight.shape[0] == 0 or weight.shape[2] == 0:
+        return f"k={k} with weight {tuple(weight.shape)}"
+    if bool(torch.isnan(weight).any()):
+        return "NaN weights"
+    return None
+
+
+@torch.no_grad()
+def native_bmu(x: torch.Tensor, weight: torch.Tensor, k: int = 1) -> torch.Tensor | None:
+    """Nearest (k = 1) or two nearest (k = 2) neurons by exact squared distance; None if unsupported.
+
+    Args:
+        x: samples, shared ``(N, D)`` or per member ``(E, N, D)``; float32 or float64 on the CPU.
+        weight: reference vectors ``(E, K, D)``, same dtype as ``x``.
+        k: 1 or 2 (``k ≤ K``).
+
+    Shape:
+        returns ``(E, N)`` for k = 1, else ``(E, N, 2)`` (best first; ties by index); dtype long.
+    """
+    if not enabled():
+        _note(f"{ENV_SWITCH}=0", logging.INFO)
+        return None
+    reason = _unsupported(x, weight, k)
+    if reason is not None:
+        _note(reason)
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    e, kk, d = weight.shape
+    n = x.shape[-2]
+    xc = x.detach().contiguous()
+    wc = weight.detach().contiguous()
+    out = torch.empty((e, n) if k == 1 else (e, n, 2), dtype=torch.long)
+    fn = lib.somtorch_bmu_f32 if x.dtype == torch.float32 else lib.somtorch_bmu_f64
+    rc = fn(xc.data_ptr(), 0 if x.ndim == 2 else n * d, wc.data_ptr(), e, n, kk, d, k, out.data_ptr(),
+            torch.get_num_threads())
+    if rc != 0:  # arguments the kernel refuses (e.g. K beyond int32 in float32): torch path
+        _note(f"kernel refused E={e}, N={n}, K={kk}, D={d}, k={k}")
+        return None
+    return out
