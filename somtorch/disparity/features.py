@@ -47,6 +47,7 @@ class Features:
     shape: tuple[int, int]
     n_invalid: int
     stride: int = 1
+    mask: torch.Tensor | None = None  # (H, W) bool: which pixels are rows of x (row-major)
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -64,9 +65,18 @@ class Features:
         stride = check_positive_int("stride", stride)
         if stride == 1:
             return self
-        keep = (self.pixels[:, 0] % stride == 0) & (self.pixels[:, 1] % stride == 0)
+        if self.mask is not None and self.stride == 1:
+            # rank of every pixel among the feature rows, read at the strided grid
+            rank = torch.cumsum(self.mask.view(-1), 0).view(self.shape) - 1
+            on_grid = self.mask[::stride, ::stride]
+            keep = rank[::stride, ::stride][on_grid]
+            sub = torch.zeros_like(self.mask)
+            sub[::stride, ::stride] = on_grid
+        else:
+            keep = ((self.pixels[:, 0] % stride == 0) & (self.pixels[:, 1] % stride == 0)).nonzero().view(-1)
+            sub = None
         return Features(self.x[keep], self.pixels[keep], self.offset, self.scale, self.shape,
-                        self.n_invalid, self.stride * stride)
+                        self.n_invalid, self.stride * stride, sub)
 
 
 def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: str = "image",
@@ -98,8 +108,7 @@ def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: st
     if n == 0:
         raise ValueError("the disparity map has no valid, finite, non-negative pixel: nothing to train on")
     yx = usable.nonzero()  # (N, 2), row-major
-    d = disparity[usable].double()
-    raw = torch.cat([yx.double(), d[:, None]], dim=1)  # (N, 3)
+    d = disparity[usable]
     if normalize == "none":
         offset = torch.zeros(3, dtype=torch.float64)
         scale = torch.tensor([1.0, 1.0, d_weight], dtype=torch.float64)
@@ -111,9 +120,13 @@ def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: st
             offset = torch.tensor([0.0, 0.0, d_lo], dtype=torch.float64)
             scale = torch.tensor([1.0 / side, 1.0 / side, d_weight / d_span], dtype=torch.float64)
         else:
-            lo = raw.amin(0)
-            span = (raw.amax(0) - lo).clamp_min(1e-6)
-            offset = lo
+            y_lo, y_hi = float(yx[0, 0]), float(yx[-1, 0])  # row-major: first and last rows
+            cols = usable.any(0).nonzero()
+            x_lo, x_hi = float(cols[0, 0]), float(cols[-1, 0])
+            offset = torch.tensor([y_lo, x_lo, d_lo], dtype=torch.float64)
+            span = torch.tensor([y_hi - y_lo, x_hi - x_lo, d_span], dtype=torch.float64).clamp_min(1e-6)
             scale = torch.tensor([1.0, 1.0, d_weight], dtype=torch.float64) / span
-    feats = ((raw - offset) * scale).to(dtype)
-    return Features(feats, yx, offset.to(dtype), scale.to(dtype), (h, w), h * w - n)
+    feats = torch.empty(n, 3, dtype=dtype)
+    for j, col in enumerate((yx[:, 0], yx[:, 1], d)):  # column-wise: no (N, 3) float64 temporaries
+        torch.mul(col.to(dtype) - float(offset[j]), float(scale[j]), out=feats[:, j])
+    return Features(feats, yx, offset.to(dtype), scale.to(dtype), (h, w), h * w - n, 1, usable)

@@ -150,26 +150,35 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     k = num_neurons
     h, w = labels.shape
     valid = labels >= 0
-    lab = labels[valid]
-    d = disparity[valid].double()
-    count = torch.bincount(lab, minlength=k).double()
-    mean_d = torch.zeros(k, dtype=torch.float64).index_add_(0, lab, d) / count
-    ys, xs = valid.nonzero(as_tuple=True)
+    # label k+1 (index K) collects the invalid pixels so that no boolean gather is needed
+    lab = torch.where(valid, labels, k)
+    count = torch.bincount(lab.view(-1), minlength=k + 1)[:k].double()
+    dsum = torch.bincount(lab.view(-1), weights=disparity.reshape(-1).double(), minlength=k + 1)[:k]
+    mean_d = dsum / count
+    # per-row / per-column presence of each label gives the boxes without listing pixel coordinates
+    rows = torch.bincount((lab + (k + 1) * torch.arange(h)[:, None]).view(-1), minlength=h * (k + 1))
+    cols = torch.bincount((lab + (k + 1) * torch.arange(w)[None, :]).view(-1), minlength=w * (k + 1))
+    rows = rows.view(h, k + 1)[:, :k] > 0  # (H, K)
+    cols = cols.view(w, k + 1)[:, :k] > 0  # (W, K)
     box = torch.empty(k, 4, dtype=torch.long)
-    box[:, 0] = torch.full((k,), w, dtype=torch.long).scatter_reduce(0, lab, xs, "amin")
-    box[:, 1] = torch.full((k,), h, dtype=torch.long).scatter_reduce(0, lab, ys, "amin")
-    box[:, 2] = torch.full((k,), -1, dtype=torch.long).scatter_reduce(0, lab, xs, "amax")
-    box[:, 3] = torch.full((k,), -1, dtype=torch.long).scatter_reduce(0, lab, ys, "amax")
+    ar_h, ar_w = torch.arange(h)[:, None], torch.arange(w)[:, None]
+    box[:, 0] = torch.where(cols, ar_w, w).amin(0)
+    box[:, 1] = torch.where(rows, ar_h, h).amin(0)
+    box[:, 2] = torch.where(cols, ar_w, -1).amax(0)
+    box[:, 3] = torch.where(rows, ar_h, -1).amax(0)
     pairs = []
-    for a, b in ((labels[:, :-1], labels[:, 1:]), (labels[:-1, :], labels[1:, :])):
-        m = (a >= 0) & (b >= 0) & (a != b)
-        pairs.append(a[m] * k + b[m])
-    flat = torch.cat(pairs)
-    boundary = torch.bincount(flat, minlength=k * k).view(k, k).double()
+    for a, b in ((lab[:, :-1], lab[:, 1:]), (lab[:-1, :], lab[1:, :])):
+        pairs.append((a * (k + 1) + b).reshape(-1))
+    boundary = torch.bincount(torch.cat(pairs), minlength=(k + 1) ** 2).view(k + 1, k + 1)[:k, :k].double()
+    boundary.fill_diagonal_(0.0)
     boundary = boundary + boundary.T
-    sample = d if d.numel() <= 100_000 else d[:: d.numel() // 100_000 + 1]
-    q = torch.quantile(sample, torch.tensor([0.05, 0.95], dtype=torch.float64))
-    return NeuronStats(count, mean_d, box, boundary, (float(d.min()), float(d.max())), (float(q[0]), float(q[1])))
+    d = disparity[valid]
+    step = max(1, d.numel() // 20_000)
+    sample = d[::step].double()
+    n = sample.numel()
+    lo_q = float(sample.kthvalue(max(1, int(0.05 * n))).values)
+    hi_q = float(sample.kthvalue(max(1, int(0.95 * n))).values)
+    return NeuronStats(count, mean_d, box, boundary, (float(d.min()), float(d.max())), (lo_q, hi_q))
 
 
 def _components(adj: torch.Tensor) -> list[list[int]]:

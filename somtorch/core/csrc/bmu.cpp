@@ -110,6 +110,28 @@ inline void tile(const T* __restrict xs, const T* __restrict w, int64_t K, int64
   }
 }
 
+// Rows xe[0 .. nv) of a (., D) array into the feature-major tile xs[d * TW + lane]; padded lanes
+// repeat the last sample (their results are discarded).
+template <typename T, int DC>
+inline void load_tile(const T* __restrict xe, int64_t nv, int64_t D, T* __restrict xs) {
+  constexpr int TW = U * Lanes<T>::W;
+  if (DC > 0 && nv == TW) {
+    for (int j = 0; j < TW; ++j)
+      for (int d = 0; d < DC; ++d) xs[d * TW + j] = xe[j * DC + d];
+  } else {
+    for (int64_t j = 0; j < TW; ++j) {
+      const T* row = xe + (j < nv ? j : nv - 1) * D;
+      for (int64_t d = 0; d < D; ++d) xs[d * TW + j] = row[d];
+    }
+  }
+}
+
+inline int clamp_threads(int nthreads, double work, int64_t items) {
+  if (nthreads < 1 || work < 262144.0) nthreads = 1;  // a fork costs more than such a call
+  if (items < nthreads) nthreads = (int)items;
+  return nthreads;
+}
+
 // x: (N, D) shared (x_stride == 0) or (E, N, D) with x_stride == N * D; w: (E, K, D);
 // out: (E, N) int64, or (E, N, 2) when TOP2.
 template <typename T, int DC, bool TOP2>
@@ -120,9 +142,7 @@ void run(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t
   const int64_t tiles = (N + TW - 1) / TW;
   const bool shared = x_stride == 0;
   const int64_t items = shared ? tiles : E * tiles;  // shared x: an item is one tile, all members
-  const double work = (double)E * (double)N * (double)K * (double)D;
-  if (nthreads < 1 || work < 262144.0) nthreads = 1;  // a fork costs more than such a call
-  if (items < nthreads) nthreads = (int)items;
+  nthreads = clamp_threads(nthreads, (double)E * (double)N * (double)K * (double)D, items);
 #pragma omp parallel num_threads(nthreads) if (nthreads > 1)
   {
     std::vector<T> xs_buf((size_t)D * TW);
@@ -135,11 +155,7 @@ void run(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t
       const int64_t t = shared ? item : item % tiles;
       const int64_t n0 = t * TW;
       const int64_t nv = N - n0 < TW ? N - n0 : TW;
-      const T* xe = x + e0 * x_stride + n0 * D;
-      for (int64_t j = 0; j < TW; ++j) {  // transpose; padded lanes repeat the last sample
-        const T* row = xe + (j < nv ? j : nv - 1) * D;
-        for (int64_t d = 0; d < D; ++d) xs[d * TW + j] = row[d];
-      }
+      load_tile<T, DC>(x + e0 * x_stride + n0 * D, nv, D, xs);
       const int64_t e_end = shared ? E : e0 + 1;
       for (int64_t e = e0; e < e_end; ++e) {
         tile<T, DC, TOP2>(xs, w + e * K * D, K, D, i1, i2);
@@ -156,6 +172,77 @@ void run(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t
       }
     }
   }
+}
+
+// Batch-map statistics: sums (E, K, D) += x_n and counts (E, K) += 1 over the samples each unit
+// wins (both zero on entry). Parallel over members only, and each member's sums are added in
+// sample order (as torch's index_add_ does), so the result does not depend on the thread count
+// and member e equals a solo map.
+template <typename T, int DC>
+void run_acc(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t K, int64_t D,
+             T* sums, int64_t* counts, int nthreads) {
+  typedef typename Lanes<T>::Idx Idx;
+  constexpr int TW = U * Lanes<T>::W;
+  const int64_t tiles = (N + TW - 1) / TW;
+  const bool shared = x_stride == 0;
+  nthreads = clamp_threads(nthreads, (double)E * (double)N * (double)K * (double)D, E);
+  std::vector<T> xt;  // shared x: all tiles transposed once, tile t at xt[t * D * TW]
+  if (shared) {
+    xt.resize((size_t)(tiles * D * TW));
+    for (int64_t t = 0; t < tiles; ++t)
+      load_tile<T, DC>(x + t * TW * D, N - t * TW < TW ? N - t * TW : TW, D, xt.data() + t * D * TW);
+  }
+#pragma omp parallel num_threads(nthreads) if (nthreads > 1)
+  {
+    std::vector<T> xs_buf(shared ? 0 : (size_t)D * TW);
+    alignas(32) Idx i1[TW];
+#pragma omp for schedule(static)
+    for (int64_t e = 0; e < E; ++e) {
+      const T* we = w + e * K * D;
+      const T* xe = x + e * x_stride;
+      T* se = sums + e * K * D;
+      int64_t* ce = counts + e * K;
+      for (int64_t t = 0; t < tiles; ++t) {
+        const int64_t n0 = t * TW;
+        const int64_t nv = N - n0 < TW ? N - n0 : TW;
+        const T* xs = xt.data() + t * D * TW;
+        if (!shared) {
+          load_tile<T, DC>(xe + n0 * D, nv, D, xs_buf.data());
+          xs = xs_buf.data();
+        }
+        tile<T, DC, false>(xs, we, K, D, i1, nullptr);
+        for (int64_t j = 0; j < nv; ++j) {
+          const int64_t k = i1[j];
+          const T* row = xe + (n0 + j) * D;
+          T* sk = se + k * D;
+          for (int64_t d = 0; d < (DC > 0 ? DC : D); ++d) sk[d] += row[d];
+          ce[k] += 1;
+        }
+      }
+    }
+  }
+}
+
+template <typename T>
+void dispatch_acc(const T* x, int64_t xs, const T* w, int64_t E, int64_t N, int64_t K, int64_t D,
+                  T* sums, int64_t* counts, int nt) {
+  switch (D) {
+    case 1: run_acc<T, 1>(x, xs, w, E, N, K, D, sums, counts, nt); break;
+    case 2: run_acc<T, 2>(x, xs, w, E, N, K, D, sums, counts, nt); break;
+    case 3: run_acc<T, 3>(x, xs, w, E, N, K, D, sums, counts, nt); break;
+    case 4: run_acc<T, 4>(x, xs, w, E, N, K, D, sums, counts, nt); break;
+    default: run_acc<T, 0>(x, xs, w, E, N, K, D, sums, counts, nt); break;
+  }
+}
+
+template <typename T>
+int entry_acc(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t K, int64_t D,
+              T* sums, int64_t* counts, int nthreads) {
+  if (E < 1 || N < 0 || K < 1 || D < 1) return 1;
+  if (K > (int64_t)std::numeric_limits<typename Lanes<T>::Idx>::max()) return 1;
+  if (N == 0) return 0;
+  dispatch_acc<T>(x, x_stride, w, E, N, K, D, sums, counts, nthreads);
+  return 0;
 }
 
 template <typename T, bool TOP2>
@@ -198,6 +285,17 @@ int somtorch_bmu_f32(const float* x, int64_t x_stride, const float* w, int64_t E
 int somtorch_bmu_f64(const double* x, int64_t x_stride, const double* w, int64_t E, int64_t N,
                      int64_t K, int64_t D, int top, int64_t* out, int nthreads) {
   return entry<double>(x, x_stride, w, E, N, K, D, top, out, nthreads);
+}
+
+int somtorch_accumulate_f32(const float* x, int64_t x_stride, const float* w, int64_t E, int64_t N,
+                            int64_t K, int64_t D, float* sums, int64_t* counts, int nthreads) {
+  return entry_acc<float>(x, x_stride, w, E, N, K, D, sums, counts, nthreads);
+}
+
+int somtorch_accumulate_f64(const double* x, int64_t x_stride, const double* w, int64_t E,
+                            int64_t N, int64_t K, int64_t D, double* sums, int64_t* counts,
+                            int nthreads) {
+  return entry_acc<double>(x, x_stride, w, E, N, K, D, sums, counts, nthreads);
 }
 
 }  // extern "C"
