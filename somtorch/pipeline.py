@@ -21,7 +21,7 @@ from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
 from .tasks.ground import GroundConfig, GroundPlane, fit_ground_plane
 from .tasks.objects import (AreaConfig, NeuronStats, ObjectArea, find_object_areas, grow_area, neuron_stats,
-                            select_areas)
+                            select_areas, tighten_box)
 from .tasks.reduction import Reduction, reduce_map
 from .tasks.scoring import Score, score_reduction
 from .tasks.segmentation import segment
@@ -220,6 +220,9 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         kept = select_areas(areas, stats, cfg.objects)
         if cfg.objects.grow:
             kept = [grow_area(a, labels[e], scene.disparity, usable, stride=cfg.objects.grow_stride) for a in kept]
+        elif cfg.objects.box_coverage < 1.0:
+            kept = [tighten_box(a, labels[e], coverage=cfg.objects.box_coverage, stride=cfg.objects.grow_stride)
+                    for a in kept]
         t1 = _tic()
         red = reduce_map([a.box for a in kept], scene.valid, tolerance_px=cfg.reduction.tolerance_px,
                          tolerance_frac=cfg.reduction.tolerance_frac)

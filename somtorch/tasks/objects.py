@@ -55,7 +55,10 @@ class AreaConfig:
             half-way between the area and its surroundings (``mean_disparity − contrast/2``): an
             object split over several areas is recovered whole, background pixels inside the
             area's segments are dropped.
-        grow_stride: the growing works on every ``grow_stride``-th pixel (speed).
+        grow_stride: the growing (and ``box_coverage``) works on every ``grow_stride``-th pixel.
+        box_coverage: a kept area's box covers its largest image-connected pieces up to this share
+            of its pixels, so stray fragments of its segments far from the object do not stretch the
+            box (1.0 = the box of all the segments' pixels, the paper's reading).
         size_power: salient: areas are ranked by ``contrast × area_frac ** size_power`` (0 = by
             contrast alone; 0.5 favours large salient objects over small salient fragments).
         max_areas: how many areas are kept at most.
@@ -71,6 +74,7 @@ class AreaConfig:
     size_power: float = 0.0
     grow: bool = False
     grow_stride: int = 2
+    box_coverage: float = 0.99
     select: str = "salient"
     max_areas: int = 1
     min_contrast: float = 0.02
@@ -85,6 +89,9 @@ class AreaConfig:
         check_choice("link", self.link, LINKS)
         check_choice("spread", self.spread, SPREADS)
         check_positive("min_boundary", self.min_boundary, allow_zero=True)
+        check_positive_int("grow_stride", self.grow_stride)
+        if not 0 < self.box_coverage <= 1:
+            raise ValueError(f"box_coverage must be in (0, 1]; got {self.box_coverage}")
         check_positive_int("max_areas", self.max_areas)
         check_positive("min_contrast", self.min_contrast, allow_zero=True)
         check_positive("max_area_frac", self.max_area_frac)
@@ -297,3 +304,33 @@ def grow_area(area: ObjectArea, labels: torch.Tensor, disparity: torch.Tensor, u
            min(h - 1, int(ys.max()) * s + s - 1))
     return ObjectArea(area.neurons, int(region.sum()) * s * s, box, area.mean_disparity, area.contrast,
                       area.area_frac, area.rank, {**area.extra, "grown": True, "grow_threshold": thr})
+
+
+def tighten_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = 0.99, stride: int = 2) -> ObjectArea:
+    """Box of the area's largest image-connected pieces holding ``coverage`` of its pixels.
+
+    Shape:
+        ``labels``: ``(H, W)`` long.
+    """
+    import cv2
+    import numpy as np
+
+    if coverage >= 1.0:
+        return area
+    s = max(1, int(stride))
+    mask = np.isin(labels[::s, ::s].cpu().numpy(), np.asarray(area.neurons)).astype(np.uint8)
+    n, _, st, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if n <= 2:
+        return area
+    sizes = st[1:, cv2.CC_STAT_AREA]
+    order = np.argsort(-sizes, kind="stable")
+    need = coverage * sizes.sum()
+    keep = order[: int(np.searchsorted(np.cumsum(sizes[order]), need)) + 1] + 1
+    x0 = int(st[keep, cv2.CC_STAT_LEFT].min()) * s
+    y0 = int(st[keep, cv2.CC_STAT_TOP].min()) * s
+    x1 = int((st[keep, cv2.CC_STAT_LEFT] + st[keep, cv2.CC_STAT_WIDTH]).max()) * s - 1 + (s - 1)
+    y1 = int((st[keep, cv2.CC_STAT_TOP] + st[keep, cv2.CC_STAT_HEIGHT]).max()) * s - 1 + (s - 1)
+    h, w = labels.shape
+    box = (max(area.box[0], x0), max(area.box[1], y0), min(area.box[2], x1, w - 1), min(area.box[3], y1, h - 1))
+    return ObjectArea(area.neurons, area.pixels, box, area.mean_disparity, area.contrast, area.area_frac,
+                      area.rank, {**area.extra, "box_coverage": coverage, "segment_box": area.box})
