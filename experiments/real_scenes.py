@@ -37,7 +37,6 @@ DEFAULT_SCENES = [
 @dataclass
 class ScenesConfig(RunConfig):
     scenes: list[str] = field(default_factory=lambda: list(DEFAULT_SCENES))
-    label: str = "robust"
 
 
 ConfigStore.instance().store(name="real_scenes_schema", node=ScenesConfig)

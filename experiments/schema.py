@@ -56,6 +56,7 @@ class RunConfig:
     paths: PathsConfig = field(default_factory=PathsConfig)
     ensemble: int = 1
     seed: int = 0
+    label: str = "robust"  # a name for the configuration (set by presets; shown in tables)
     object_id: Optional[int] = None
     log_every_epoch: bool = True
 
