@@ -4,11 +4,17 @@ Distances use the expansion ``‖x − w‖² = ‖x‖² − 2 x·w + ‖w‖²
 the ranking, so the search computes ``‖w‖² − 2 x·w`` with one ``addmm``/``baddbmm`` per chunk and
 never holds more than ``chunk_elements`` scores at once, whatever N is. Rows are processed in chunks
 so a 100-million-pixel input needs no N×K matrix.
+
+On the CPU, the nearest one or two units come from the fused C++ kernel of
+:mod:`somtorch.core.native` (exact squared distances, first index on ties, no score matrix at all)
+whenever it builds; ``SOMTORCH_NATIVE=0`` forces the torch path above.
 """
 
 from __future__ import annotations
 
 import torch
+
+from .native import native_bmu
 
 DEFAULT_CHUNK_ELEMENTS = 1 << 22  # scores per chunk (16 MiB in float32)
 
@@ -44,7 +50,6 @@ def bmu_search(x: torch.Tensor, weight: torch.Tensor, *, k: int = 1,
     available (exact squared distances ``Σ_d (x_d − w_d)²``, no score matrix); elsewhere, or with
     ``SOMTORCH_NATIVE=0``, the chunked ``‖w‖² − 2 x·w`` expansion below.
     """
-    from .native import native_bmu
 
     if k in (1, 2):
         fused = native_bmu(x, weight, k=k)

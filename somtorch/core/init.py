@@ -18,9 +18,13 @@ import torch
 INITS = ("random", "sample", "pca")
 
 
-def init_random(x: torch.Tensor, k: int, generator: torch.Generator) -> torch.Tensor:
-    """Uniform in the data's bounding box. Shape: ``x`` ``(N, D)`` → ``(K, D)``."""
-    lo, hi = x.amin(0), x.amax(0)
+def init_random(x: torch.Tensor, k: int, generator: torch.Generator,
+                bounds: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
+    """Uniform in the data's bounding box (``bounds`` = precomputed (min, max) per feature).
+
+    Shape: ``x`` ``(N, D)`` → ``(K, D)``.
+    """
+    lo, hi = bounds if bounds is not None else (x.amin(0), x.amax(0))
     u = torch.rand(k, x.shape[1], generator=generator, dtype=torch.float64, device=x.device)
     return (lo.double() + u * (hi - lo).double()).to(x.dtype)
 

@@ -3,11 +3,13 @@
 :func:`native_bmu` computes, for every member e and sample n, the argmin over the K neurons of the
 exact squared distance ``Σ_d (x_nd − w_ekd)²`` (summed left to right in the input precision; first
 index on ties, as ``torch.argmin``), and optionally the second-best neuron, without ever holding the
-``N × E × K`` score matrix. The kernel (``csrc/bmu.cpp``) is vectorised over samples and split over
-blocks of samples with OpenMP; every (e, n) is computed by the same operations whatever the thread
-count, the chunking or the ensemble size, so member e equals a solo map with that member's weights.
+``N × E × K`` score matrix. :func:`native_accumulate` fuses that search with the batch-map sums and
+counts. The kernel (``csrc/bmu.cpp``) is vectorised over samples and split over blocks of samples
+(over members for the sums) with OpenMP; every (e, n) is computed by the same operations whatever
+the thread count, the chunking or the ensemble size, so member e equals a solo map with that
+member's weights.
 
-The kernel is plain C++ with a C ABI (no torch headers, so it compiles in about a second), loaded
+The kernel is plain C++ with a C ABI (no torch headers, so it compiles in about 3 s), loaded
 with :mod:`ctypes`. It is compiled on the first call with the system C++ compiler (``$CXX`` or
 ``c++``) into ``$SOMTORCH_CACHE_DIR`` (default ``$XDG_CACHE_HOME/somtorch/native`` or
 ``~/.cache/somtorch/native``) under a name that hashes the source, the compiler and the flags; an
@@ -16,7 +18,8 @@ library is moved into place atomically. ``-mavx2 -mfma`` are used only when the 
 
 ``native_bmu`` returns ``None`` whenever the kernel cannot serve the call — ``SOMTORCH_NATIVE=0``,
 no compiler or a failed build (logged once as a warning), non-CPU tensors, dtypes other than
-float32/float64, mixed dtypes, NaN weights — and callers then use the torch path.
+float32/float64, mixed dtypes, NaN weights (where ``torch.argmin`` would pick the NaN) — and callers
+then use the torch path.
 """
 
 from __future__ import annotations
@@ -34,12 +37,17 @@ from pathlib import Path
 
 import torch
 
+try:
+    import fcntl
+except ImportError:  # Windows: no lock; the atomic rename alone keeps concurrent builds correct
+    fcntl = None
+
 logger = logging.getLogger(__name__)
 
 ENV_SWITCH = "SOMTORCH_NATIVE"  # "0" disables the native kernel
 ENV_CACHE = "SOMTORCH_CACHE_DIR"
 SOURCE = Path(__file__).resolve().parent / "csrc" / "bmu.cpp"
-ABI = 1  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
+ABI = 2  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
 BASE_FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off")
 BUILD_TIMEOUT_S = 300
 
@@ -118,7 +126,8 @@ def _build() -> Path:
         if not os.access(folder, os.W_OK):
             raise PermissionError(f"{folder} is not writable")
     except OSError:  # e.g. a read-only home: a per-user folder in the temporary directory
-        folder = Path(tempfile.gettempdir()) / f"somtorch-native-{os.getuid() if hasattr(os, 'getuid') else 0}"
+        user = os.getuid() if hasattr(os, "getuid") else os.getpid()
+        folder = Path(tempfile.gettempdir()) / f"somtorch-native-{user}"
         folder.mkdir(parents=True, exist_ok=True)
     errors = []
     for flags in variants:
@@ -128,12 +137,8 @@ def _build() -> Path:
         if target.exists():
             return target
         with open(folder / f"bmu-{key}.lock", "w") as lock:
-            try:
-                import fcntl
-
+            if fcntl is not None:
                 fcntl.flock(lock, fcntl.LOCK_EX)  # another process may be compiling this one
-            except ImportError:  # no fcntl (Windows): the atomic replace alone keeps it correct
-                pass
             if target.exists():
                 return target
             err = _compile(cxx, flags, target)
@@ -155,6 +160,10 @@ def _load() -> ctypes.CDLL:
     for fn in (lib.somtorch_bmu_f32, lib.somtorch_bmu_f64):
         # x, x_stride, w, E, N, K, D, top, out, nthreads
         fn.argtypes = [p, i64, p, i64, i64, i64, i64, i32, p, i32]
+        fn.restype = ctypes.c_int
+    for fn in (lib.somtorch_accumulate_f32, lib.somtorch_accumulate_f64):
+        # x, x_stride, w, E, N, K, D, sums, counts, nthreads
+        fn.argtypes = [p, i64, p, i64, i64, i64, i64, p, p, i32]
         fn.restype = ctypes.c_int
     return lib
 
@@ -194,9 +203,13 @@ def _unsupported(x: torch.Tensor, weight: torch.Tensor, k: int) -> str | None:
         return f"shapes x {tuple(x.shape)}, weight {tuple(weight.shape)}"
     if k not in (1, 2) or weight.shape[1] < k or weight.shape[0] == 0 or weight.shape[2] == 0:
         return f"k={k} with weight {tuple(weight.shape)}"
-    if bool(torch.isnan(weight).any()):
-        return "NaN weights"
     return None
+
+
+def _refusal(rc: int, e: int, n: int, k: int, d: int) -> str:
+    if rc == 2:  # torch.argmin picks a NaN distance, the kernel never would
+        return "NaN weights"
+    return f"the kernel refused E={e}, N={n}, K={k}, D={d} (e.g. K beyond int32 in float32)"
 
 
 @torch.no_grad()
@@ -229,7 +242,44 @@ def native_bmu(x: torch.Tensor, weight: torch.Tensor, k: int = 1) -> torch.Tenso
     fn = lib.somtorch_bmu_f32 if x.dtype == torch.float32 else lib.somtorch_bmu_f64
     rc = fn(xc.data_ptr(), 0 if x.ndim == 2 else n * d, wc.data_ptr(), e, n, kk, d, k, out.data_ptr(),
             torch.get_num_threads())
-    if rc != 0:  # arguments the kernel refuses (e.g. K beyond int32 in float32): torch path
-        _note(f"kernel refused E={e}, N={n}, K={kk}, D={d}, k={k}")
+    if rc != 0:
+        _note(_refusal(rc, e, n, kk, d))
         return None
     return out
+
+
+@torch.no_grad()
+def native_accumulate(x: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """Batch-map statistics in one pass: per-unit sums and counts of the samples each unit wins.
+
+    The same result as :func:`somtorch.core.training.accumulate` (BMUs by :func:`native_bmu`, each
+    member's sums added in sample order like ``index_add_``) without the ``E·N`` index and copy
+    tensors. Threads split the members (a solo map runs on one thread). None if unsupported.
+
+    Shape:
+        ``x`` ``(N, D)`` or ``(E, N, D)``, ``weight`` ``(E, K, D)`` → sums ``(E, K, D)``, counts
+        ``(E, K)``, both in the dtype of ``weight``.
+    """
+    if not enabled():
+        _note(f"{ENV_SWITCH}=0", logging.INFO)
+        return None
+    reason = _unsupported(x, weight, 1)
+    if reason is not None:
+        _note(reason)
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    e, kk, d = weight.shape
+    n = x.shape[-2]
+    xc = x.detach().contiguous()
+    wc = weight.detach().contiguous()
+    sums = torch.zeros(e, kk, d, dtype=weight.dtype)
+    counts = torch.zeros(e, kk, dtype=torch.long)
+    fn = lib.somtorch_accumulate_f32 if x.dtype == torch.float32 else lib.somtorch_accumulate_f64
+    rc = fn(xc.data_ptr(), 0 if x.ndim == 2 else n * d, wc.data_ptr(), e, n, kk, d, sums.data_ptr(),
+            counts.data_ptr(), torch.get_num_threads())
+    if rc != 0:
+        _note(_refusal(rc, e, n, kk, d))
+        return None
+    return sums, counts.to(weight.dtype)

@@ -191,6 +191,7 @@ class SOM(nn.Module):
         x = self._check_x(x)
         check_choice("method", method, INITS)
         members = []
+        bounds = (x.amin(0), x.amax(0)) if x.ndim == 2 else None  # shared data: once, not per member
         for e in range(self.ensemble):
             xe = x if x.ndim == 2 else x[e]
             if method == "pca":
@@ -200,7 +201,8 @@ class SOM(nn.Module):
             elif method == "sample":
                 members.append(init_sample(xe, self.num_neurons, self._generators[e]))
             else:
-                members.append(init_random(xe, self.num_neurons, self._generators[e]))
+                members.append(init_random(xe, self.num_neurons, self._generators[e],
+                                           bounds=bounds if x.ndim == 2 else None))
         return self.set_weight(torch.stack(members))
 
     # ------------------------------------------------------------------ training

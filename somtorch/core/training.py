@@ -23,6 +23,7 @@ import torch
 
 from .decay import DecayFn, schedule
 from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search
+from .native import native_accumulate
 from .neighborhood import NeighborhoodFn, gaussian
 
 BLOCK_STEPS = 4096  # steps whose samples and schedule values are prepared at once (online rule)
@@ -180,6 +181,9 @@ def accumulate(x: torch.Tensor, weight: torch.Tensor,
     Shape:
         ``x`` ``(N, D)`` or ``(E, N, D)``, ``weight`` ``(E, K, D)`` → sums ``(E, K, D)``, counts ``(E, K)``.
     """
+    fused = native_accumulate(x, weight)  # the same sums, bitwise, in one pass (CPU kernel)
+    if fused is not None:
+        return fused
     e, k, d = weight.shape
     sums = torch.zeros(e * k, d, dtype=weight.dtype, device=weight.device)
     counts = torch.zeros(e * k, dtype=weight.dtype, device=weight.device)

@@ -18,13 +18,19 @@ import torch
 
 from somtorch.core import native
 from somtorch.core.distance import bmu_search
-from somtorch.core.native import native_bmu
+from somtorch.core.native import native_accumulate, native_bmu
+from somtorch.core.training import accumulate
 
 
 @pytest.fixture(autouse=True)
 def _kernel_enabled(monkeypatch):
-    """Test the kernel even when the suite runs with ``SOMTORCH_NATIVE=0``; skip if it cannot build."""
+    """Test the kernel even when the suite runs with ``SOMTORCH_NATIVE=0``."""
     monkeypatch.delenv(native.ENV_SWITCH, raising=False)
+
+
+@pytest.fixture
+def kernel():
+    """Skip (with the reason) where the kernel cannot be built here; the fallback tests run anyway."""
     if native.library() is None:
         pytest.skip(f"the native BMU kernel could not be built or loaded ({native._failed}); "
                     "bmu_search uses the torch path")
@@ -63,7 +69,7 @@ SHAPES = [(28, 3), (1, 1), (1, 3), (5, 1), (3, 2), (9, 4), (28, 7), (40, 5), (2,
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64], ids=["f32", "f64"])
 @pytest.mark.parametrize("member", [False, True], ids=["shared", "member"])
 @pytest.mark.parametrize("k,d", SHAPES, ids=[f"K{k}-D{d}" for k, d in SHAPES])
-def test_equals_brute_force(k, d, member, dtype):
+def test_equals_brute_force(kernel, k, d, member, dtype):
     for n in (1, 17, 203):  # 203: no multiple of any tile (8 or 16 samples)
         x, w = _data(3, n, k, d, dtype, member, seed=k * 100 + d + n)
         dist = _sqdist(x, w)
@@ -76,7 +82,7 @@ def test_equals_brute_force(k, d, member, dtype):
             assert torch.equal(got2, _top2(dist))
 
 
-def test_float32_equals_float64_distances_up_to_near_ties():
+def test_float32_equals_float64_distances_up_to_near_ties(kernel):
     x, w = _data(4, 3000, 28, 3, torch.float32, False, seed=1)
     got = native_bmu(x, w)
     dist = _sqdist(x.double(), w.double())
@@ -88,7 +94,7 @@ def test_float32_equals_float64_distances_up_to_near_ties():
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64], ids=["f32", "f64"])
 @pytest.mark.parametrize("member", [False, True], ids=["shared", "member"])
-def test_ties_pick_the_first_index(dtype, member):
+def test_ties_pick_the_first_index(kernel, dtype, member):
     x, w = _data(3, 301, 28, 3, dtype, member, ints=True)
     w[:, 20] = w[:, 4]  # duplicate neurons: 4 must win over 20
     dist = _sqdist(x, w)
@@ -98,7 +104,7 @@ def test_ties_pick_the_first_index(dtype, member):
     assert not bool((native_bmu(x, w) == 20).any())
 
 
-def test_threads_chunks_and_members_do_not_change_the_result():
+def test_threads_chunks_and_members_do_not_change_the_result(kernel):
     x, w = _data(5, 20011, 28, 3, torch.float32, False, seed=2)
     before = torch.get_num_threads()
     try:
@@ -115,14 +121,44 @@ def test_threads_chunks_and_members_do_not_change_the_result():
         assert torch.equal(one, other)
 
 
-def test_bmu_search_dispatches_to_the_kernel(monkeypatch):
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64], ids=["f32", "f64"])
+@pytest.mark.parametrize("member", [False, True], ids=["shared", "member"])
+@pytest.mark.parametrize("k,d", [(28, 3), (1, 2), (6, 1), (9, 7)], ids=["K28-D3", "K1-D2", "K6-D1", "K9-D7"])
+def test_accumulate_equals_the_torch_accumulation_bitwise(kernel, k, d, member, dtype):
+    x, w = _data(3, 1003, k, d, dtype, member, seed=k + d)
+    want_sums, want_counts = accumulate(x, w, chunk_elements=997)  # BMUs + index_add_ in sample order
+    sums, counts = native_accumulate(x, w)
+    assert sums.dtype == counts.dtype == dtype and sums.shape == (3, k, d) and counts.shape == (3, k)
+    assert torch.equal(sums, want_sums) and torch.equal(counts, want_counts)
+    assert int(counts.sum()) == 3 * 1003
+
+
+def test_accumulate_threads_and_members_do_not_change_the_result(kernel):
+    x, w = _data(5, 20011, 28, 3, torch.float32, False, seed=4)
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        one = native_accumulate(x, w)
+        torch.set_num_threads(2)
+        two = native_accumulate(x, w)
+        solo = [native_accumulate(x, w[e:e + 1]) for e in range(5)]
+    finally:
+        torch.set_num_threads(before)
+    for i in range(2):
+        assert torch.equal(one[i], two[i])
+        assert torch.equal(one[i], torch.cat([s[i] for s in solo]))
+
+
+def test_bmu_search_dispatches_to_the_kernel(kernel, monkeypatch):
     calls = []
 
     def spy(x, w, k=1):
         calls.append(k)
         return native_bmu(x, w, k=k)
 
-    monkeypatch.setattr(native, "native_bmu", spy)
+    import somtorch.core.distance as distance
+
+    monkeypatch.setattr(distance, "native_bmu", spy)
     x, w = _data(2, 50, 6, 3, torch.float64, False)
     assert torch.equal(bmu_search(x, w), _sqdist(x, w).argmin(-1))
     assert torch.equal(bmu_search(x, w, k=2), _top2(_sqdist(x, w)))
@@ -130,7 +166,15 @@ def test_bmu_search_dispatches_to_the_kernel(monkeypatch):
     assert calls == [1, 2]
 
 
-def test_unsupported_calls_return_none():
+def test_no_samples(kernel):
+    _, w = _data(2, 1, 4, 3, torch.float32, False)
+    assert native_bmu(torch.empty(0, 3), w).shape == (2, 0)
+    assert native_bmu(torch.empty(2, 0, 3), w, k=2).shape == (2, 0, 2)
+    sums, counts = native_accumulate(torch.empty(0, 3), w)
+    assert not sums.any() and not counts.any()
+
+
+def test_unsupported_calls_return_none(kernel):
     x, w = _data(2, 10, 4, 3, torch.float32, False)
     assert native_bmu(x.half(), w.half()) is None
     assert native_bmu(x.double(), w) is None
@@ -139,6 +183,7 @@ def test_unsupported_calls_return_none():
     w_nan = w.clone()
     w_nan[0, 1, 2] = float("nan")
     assert native_bmu(x, w_nan) is None
+    assert native_accumulate(x, w_nan) is None and native_accumulate(x.half(), w.half()) is None
     assert torch.equal(bmu_search(x, w_nan)[1], bmu_search(x, w)[1])  # the torch path serves it
 
 
@@ -174,3 +219,26 @@ def test_env_switch_disables_the_kernel():
     assert proc.returncode == 0, proc.stderr
     assert "torch.Size([2, 9])" in proc.stdout
     assert "SOMTORCH_NATIVE=0" in proc.stderr
+
+
+@pytest.mark.slow
+def test_concurrent_first_builds_share_one_library(kernel, tmp_path):
+    """Two processes building into an empty cache at once (as two xdist workers may) both get the
+    kernel; one compiles under the file lock, the other waits and loads it; no temporary files stay."""
+    code = (
+        "import torch\n"
+        "from somtorch.core import native\n"
+        "assert native.library() is not None, native._failed\n"
+        "x, w = torch.rand(50, 3), torch.rand(2, 5, 3)\n"
+        "print(native.native_bmu(x, w).shape)\n"
+    )
+    env = {**os.environ, native.ENV_CACHE: str(tmp_path)}
+    env.pop(native.ENV_SWITCH, None)
+    procs = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    for p in procs:
+        out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+        assert "torch.Size([2, 50])" in out
+    assert len(list(tmp_path.glob("*.so"))) == 1
+    assert not list(tmp_path.glob("*.tmp*"))

@@ -126,10 +126,20 @@ inline void load_tile(const T* __restrict xe, int64_t nv, int64_t D, T* __restri
   }
 }
 
+constexpr double kMinWorkPerThread = 1048576.0;  // E·N·K·D terms (~0.2 ms): less is not worth a fork
+
 inline int clamp_threads(int nthreads, double work, int64_t items) {
-  if (nthreads < 1 || work < 262144.0) nthreads = 1;  // a fork costs more than such a call
+  if (nthreads < 1 || work < kMinWorkPerThread) nthreads = 1;
   if (items < nthreads) nthreads = (int)items;
   return nthreads;
+}
+
+// Items per dynamically scheduled chunk: about 1/16 of kMinWorkPerThread each. Dynamic, not
+// static, so that a thread the OS has descheduled (a busy 2-core machine) does not leave its
+// fixed share waiting; which thread computes an item never changes its result.
+inline int64_t chunk_items(double work_per_item) {
+  const double c = kMinWorkPerThread / 16.0 / (work_per_item > 1.0 ? work_per_item : 1.0);
+  return c < 1.0 ? 1 : (int64_t)c;
 }
 
 // x: (N, D) shared (x_stride == 0) or (E, N, D) with x_stride == N * D; w: (E, K, D);
@@ -143,13 +153,14 @@ void run(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t
   const bool shared = x_stride == 0;
   const int64_t items = shared ? tiles : E * tiles;  // shared x: an item is one tile, all members
   nthreads = clamp_threads(nthreads, (double)E * (double)N * (double)K * (double)D, items);
+  const int64_t chunk = chunk_items((double)(shared ? E : 1) * TW * (double)K * (double)D);
 #pragma omp parallel num_threads(nthreads) if (nthreads > 1)
   {
     std::vector<T> xs_buf((size_t)D * TW);
     T* xs = xs_buf.data();
     alignas(32) Idx i1[TW];
     alignas(32) Idx i2[TW];
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, chunk)
     for (int64_t item = 0; item < items; ++item) {
       const int64_t e0 = shared ? 0 : item / tiles;
       const int64_t t = shared ? item : item % tiles;
@@ -196,7 +207,7 @@ void run_acc(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int
   {
     std::vector<T> xs_buf(shared ? 0 : (size_t)D * TW);
     alignas(32) Idx i1[TW];
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 1)
     for (int64_t e = 0; e < E; ++e) {
       const T* we = w + e * K * D;
       const T* xe = x + e * x_stride;
@@ -235,11 +246,20 @@ void dispatch_acc(const T* x, int64_t xs, const T* w, int64_t E, int64_t N, int6
   }
 }
 
+// NaN weights would never win here but do win in torch.argmin: leave those calls to torch (2).
+template <typename T>
+bool has_nan(const T* w, int64_t count) {
+  bool nan = false;
+  for (int64_t i = 0; i < count; ++i) nan |= w[i] != w[i];
+  return nan;
+}
+
 template <typename T>
 int entry_acc(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t K, int64_t D,
               T* sums, int64_t* counts, int nthreads) {
   if (E < 1 || N < 0 || K < 1 || D < 1) return 1;
   if (K > (int64_t)std::numeric_limits<typename Lanes<T>::Idx>::max()) return 1;
+  if (has_nan(w, E * K * D)) return 2;
   if (N == 0) return 0;
   dispatch_acc<T>(x, x_stride, w, E, N, K, D, sums, counts, nthreads);
   return 0;
@@ -262,6 +282,7 @@ int entry(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_
           int top, int64_t* out, int nthreads) {
   if (E < 1 || N < 0 || K < 1 || D < 1 || (top != 1 && top != 2) || (top == 2 && K < 2)) return 1;
   if (K > (int64_t)std::numeric_limits<typename Lanes<T>::Idx>::max()) return 1;
+  if (has_nan(w, E * K * D)) return 2;
   if (N == 0) return 0;
   if (top == 2)
     dispatch_d<T, true>(x, x_stride, w, E, N, K, D, out, nthreads);
@@ -275,7 +296,7 @@ int entry(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_
 extern "C" {
 
 // Version of this C ABI; native.py refuses a library that reports another one.
-int somtorch_bmu_abi(void) { return 1; }
+int somtorch_bmu_abi(void) { return 2; }
 
 int somtorch_bmu_f32(const float* x, int64_t x_stride, const float* w, int64_t E, int64_t N,
                      int64_t K, int64_t D, int top, int64_t* out, int nthreads) {
