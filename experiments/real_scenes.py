@@ -45,7 +45,7 @@ ConfigStore.instance().store(name="real_scenes_schema", node=ScenesConfig)
 def evaluate(cfg: ScenesConfig) -> dict:
     """Run and score every scene; returns the JSON-ready results."""
     from somtorch.disparity.scene import load_scene
-    from somtorch.pipeline import PipelineConfig, run_pipeline
+    from somtorch.pipeline import run_pipeline
     from somtorch.tasks.scoring import score_reduction
 
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
@@ -56,12 +56,10 @@ def evaluate(cfg: ScenesConfig) -> dict:
     for s, spec in zip(scenes, cfg.scenes):
         if s.objects is None:
             raise ValueError(f"{data_dir / spec} has no objects.png: it cannot be scored")
-    pcfg = PipelineConfig(features=cfg.features, som=cfg.som, train=cfg.train, ground=cfg.ground,
-                          objects=cfg.objects, reduction=cfg.reduction, ensemble=cfg.ensemble, seed=cfg.seed)
     rows = []
     for spec, scene in zip(cfg.scenes, scenes):
         t0 = time.perf_counter()
-        res = run_pipeline(scene, pcfg, metrics=False)
+        res = run_pipeline(scene, cfg, metrics=False)
         wall = time.perf_counter() - t0
         scores = [m.score for m in res.members]
         per_object = {}

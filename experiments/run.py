@@ -62,7 +62,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
 
     from somtorch.atomic import write_json
     from somtorch.outputs import summarize, write_maps, write_point_clouds
-    from somtorch.pipeline import PipelineConfig, run_pipeline
+    from somtorch.pipeline import run_pipeline
 
     t_start = time.perf_counter()
     scene = load_input(cfg)
@@ -70,9 +70,6 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
     if not 0 <= cfg.output.member < cfg.ensemble:
         raise ValueError(f"output.member={cfg.output.member} must be in [0, ensemble={cfg.ensemble})")
-    pcfg = PipelineConfig(features=cfg.features, som=cfg.som, train=cfg.train, ground=cfg.ground,
-                          objects=cfg.objects, reduction=cfg.reduction, ensemble=cfg.ensemble, seed=cfg.seed,
-                          object_id=cfg.object_id)
     out_dir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     writer = None
@@ -80,7 +77,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
         if cfg.output.tensorboard:
             from torch.utils.tensorboard import SummaryWriter
             writer = SummaryWriter(str(stage / "tb"))
-        result = run_pipeline(scene, pcfg, progress=False, log_training=writer.add_scalar if writer else None)
+        result = run_pipeline(scene, cfg, progress=False, log_training=writer.add_scalar if writer else None)
         metrics = summarize(scene, result, config_dict)
         if result.ground is not None:
             metrics["ground_plane"] = result.ground.as_dict()

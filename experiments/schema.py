@@ -13,9 +13,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from somtorch.outputs import OutputConfig
-from somtorch.pipeline import FeatureConfig, ReductionConfig, SOMConfig, TrainConfig
-from somtorch.tasks.ground import GroundConfig
-from somtorch.tasks.objects import AreaConfig
+from somtorch.pipeline import PipelineConfig
 
 
 @dataclass
@@ -44,21 +42,14 @@ class PathsConfig:
 
 
 @dataclass
-class RunConfig:
+class RunConfig(PipelineConfig):
+    """The pipeline's own config (features, som, train, ground, objects, reduction, ensemble, seed,
+    object_id) plus where the data comes from and what is written."""
+
     data: DataConfig = field(default_factory=DataConfig)
-    features: FeatureConfig = field(default_factory=FeatureConfig)
-    som: SOMConfig = field(default_factory=SOMConfig)
-    train: TrainConfig = field(default_factory=TrainConfig)
-    ground: GroundConfig = field(default_factory=GroundConfig)
-    objects: AreaConfig = field(default_factory=AreaConfig)
-    reduction: ReductionConfig = field(default_factory=ReductionConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
     paths: PathsConfig = field(default_factory=PathsConfig)
-    ensemble: int = 1
-    seed: int = 0
     label: str = "robust"  # a name for the configuration (set by presets; shown in tables)
-    object_id: Optional[int] = None
-    log_every_epoch: bool = True
 
 
 def register() -> None:

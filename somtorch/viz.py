@@ -29,16 +29,25 @@ def save_png(image: np.ndarray, path: str | os.PathLike) -> Path:
     return Path(path)
 
 
-def colorize(values: torch.Tensor, valid: torch.Tensor | None = None, *, lo: float | None = None,
-             hi: float | None = None, cmap: int = cv2.COLORMAP_TURBO) -> np.ndarray:
-    """Colour-map a float map ``(H, W)`` (NaN / invalid → black). Returns ``(H, W, 3)`` uint8 RGB."""
+def _unit(values: torch.Tensor, valid: torch.Tensor | None, lo: float | None,
+          hi: float | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """Values scaled to [0, 1] between lo and hi (default: their range) and the mask of usable ones."""
     v = values.detach().double().cpu().numpy()
     ok = np.isfinite(v) if valid is None else (valid.cpu().numpy() & np.isfinite(v))
     if not ok.any():
-        return np.zeros((*v.shape, 3), np.uint8)
+        return None
     lo = float(v[ok].min()) if lo is None else lo
     hi = float(v[ok].max()) if hi is None else hi
-    g = np.clip((np.where(ok, v, lo) - lo) / max(hi - lo, 1e-12), 0, 1)
+    return np.clip((np.where(ok, v, lo) - lo) / max(hi - lo, 1e-12), 0, 1), ok
+
+
+def colorize(values: torch.Tensor, valid: torch.Tensor | None = None, *, lo: float | None = None,
+             hi: float | None = None, cmap: int = cv2.COLORMAP_TURBO) -> np.ndarray:
+    """Colour-map a float map ``(H, W)`` (NaN / invalid → black). Returns ``(H, W, 3)`` uint8 RGB."""
+    unit = _unit(values, valid, lo, hi)
+    if unit is None:
+        return np.zeros((*values.shape, 3), np.uint8)
+    g, ok = unit
     rgb = cv2.cvtColor(cv2.applyColorMap((g * 255).astype(np.uint8), cmap), cv2.COLOR_BGR2RGB)
     rgb[~ok] = 0
     return rgb
@@ -47,13 +56,11 @@ def colorize(values: torch.Tensor, valid: torch.Tensor | None = None, *, lo: flo
 def grey(values: torch.Tensor, valid: torch.Tensor | None = None, *, lo: float | None = None,
          hi: float | None = None) -> np.ndarray:
     """Grey rendering of a float map (near = bright), invalid black. ``(H, W)`` → ``(H, W, 3)`` uint8."""
-    v = values.detach().double().cpu().numpy()
-    ok = np.isfinite(v) if valid is None else (valid.cpu().numpy() & np.isfinite(v))
-    if not ok.any():
-        return np.zeros((*v.shape, 3), np.uint8)
-    lo = float(v[ok].min()) if lo is None else lo
-    hi = float(v[ok].max()) if hi is None else hi
-    g = (np.clip((np.where(ok, v, lo) - lo) / max(hi - lo, 1e-12), 0, 1) * 215 + 40).astype(np.uint8)
+    unit = _unit(values, valid, lo, hi)
+    if unit is None:
+        return np.zeros((*values.shape, 3), np.uint8)
+    g, ok = unit
+    g = (g * 215 + 40).astype(np.uint8)
     g[~ok] = 0
     return np.repeat(g[..., None], 3, axis=2)
 
