@@ -144,6 +144,10 @@ class ObjectArea:
     rank: int = -1
     extra: dict = field(default_factory=dict)
 
+    def mask(self, labels: torch.Tensor) -> torch.Tensor:
+        """The area's pixels: the union of its neurons' segments. ``labels`` ``(H, W)`` → ``(H, W)`` bool."""
+        return torch.isin(labels, torch.tensor(self.neurons, dtype=labels.dtype, device=labels.device))
+
 
 def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int) -> NeuronStats:
     """Statistics of the segments of one label map.

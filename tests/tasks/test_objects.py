@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from somtorch.core.grid import grid_sqdist
-from somtorch.tasks.objects import AreaConfig, find_object_areas, neuron_stats, select_areas
+from somtorch.tasks.objects import AreaConfig, ObjectArea, find_object_areas, neuron_stats, select_areas
 
 ROWS, COLS, B = 4, 7, 5
 # conf/objects/paper.yaml: keep the nearest area, no size or contrast limits
@@ -243,3 +243,9 @@ def test_area_config_rejects_bad_values(kwargs):
 def test_area_config_error_lists_the_valid_selections():
     with pytest.raises(ValueError, match="all, nearest, salient"):
         AreaConfig(select="largest")
+
+
+def test_area_mask_is_the_union_of_its_segments():
+    labels = torch.tensor([[0, 1, 2], [2, -1, 1]])
+    area = ObjectArea(neurons=[1, 2], pixels=4, box=(1, 0, 2, 1), mean_disparity=1.0, contrast=0.0, area_frac=0.8)
+    assert torch.equal(area.mask(labels), torch.tensor([[False, True, True], [True, False, True]]))
