@@ -4,14 +4,13 @@ Takes plain tensors and numbers (no dependency on the disparity readers). Import
 does not import Open3D; the functions that need it import it on first use.
 """
 
+from somtorch.geometry.ply import read_ply, write_ply
 from somtorch.geometry.pointcloud import (
     PointCloud,
     depth_to_points,
     disparity_to_depth,
     disparity_to_point_cloud,
     intrinsics_matrix,
-    read_ply,
-    write_ply,
 )
 from somtorch.geometry.render import open3d_rendering_available, render_point_cloud
 

@@ -26,7 +26,8 @@ from pathlib import Path
 import torch
 
 from somtorch._optional import import_open3d
-from somtorch.geometry.pointcloud import PointCloud, _atomic_output
+from somtorch.geometry.ply import _atomic_output
+from somtorch.geometry.pointcloud import PointCloud
 from somtorch.validation import check_choice, check_positive, check_positive_int
 
 __all__ = ["MAX_SCATTER_POINTS", "open3d_rendering_available", "render_point_cloud"]
@@ -40,6 +41,7 @@ _ENV = "SOMTORCH_OPEN3D_RENDER"
 _PROBE_TIMEOUT_S = 60.0
 _PROBE_MARK = "SOMTORCH_OPEN3D_RENDER_OK"
 _PROBE = f"""
+import sys
 import numpy as np, open3d as o3d
 r = o3d.visualization.rendering.OffscreenRenderer(32, 24)
 pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.random.default_rng(0).random((64, 3))))
@@ -48,8 +50,9 @@ m.shader = "defaultUnlit"
 r.scene.add_geometry("p", pcd, m)
 r.setup_camera(60.0, [0.5, 0.5, 0.5], [0.5, 0.5, -2.0], [0.0, -1.0, 0.0])
 img = np.asarray(r.render_to_image())
-assert img.shape == (24, 32, 3), img.shape
-print("{_PROBE_MARK}")
+if img.shape != (24, 32, 3):
+    raise SystemExit(f"AssertionError: {{img.shape}}")
+sys.stdout.write("{_PROBE_MARK}\\n")
 """
 
 # (elevation, azimuth) in degrees: where the viewer sits relative to the cloud's centre, in the
