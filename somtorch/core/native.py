@@ -212,6 +212,22 @@ def _refusal(rc: int, e: int, n: int, k: int, d: int) -> str:
     return f"the kernel refused E={e}, N={n}, K={k}, D={d} (e.g. K beyond int32 in float32)"
 
 
+def _prepare(x: torch.Tensor, weight: torch.Tensor, k: int):
+    """``(library, x, weight contiguous, (E, K, D, N))`` for a kernel call, or None (reason logged once)."""
+    if not enabled():
+        _note(f"{ENV_SWITCH}=0", logging.INFO)
+        return None
+    reason = _unsupported(x, weight, k)
+    if reason is not None:
+        _note(reason)
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    e, kk, d = weight.shape
+    return lib, x.detach().contiguous(), weight.detach().contiguous(), (e, kk, d, x.shape[-2])
+
+
 @torch.no_grad()
 def native_bmu(x: torch.Tensor, weight: torch.Tensor, k: int = 1) -> torch.Tensor | None:
     """Nearest (k = 1) or two nearest (k = 2) neurons by exact squared distance; None if unsupported.
@@ -224,20 +240,10 @@ def native_bmu(x: torch.Tensor, weight: torch.Tensor, k: int = 1) -> torch.Tenso
     Shape:
         returns ``(E, N)`` for k = 1, else ``(E, N, 2)`` (best first; ties by index); dtype long.
     """
-    if not enabled():
-        _note(f"{ENV_SWITCH}=0", logging.INFO)
+    call = _prepare(x, weight, k)
+    if call is None:
         return None
-    reason = _unsupported(x, weight, k)
-    if reason is not None:
-        _note(reason)
-        return None
-    lib = library()
-    if lib is None:
-        return None
-    e, kk, d = weight.shape
-    n = x.shape[-2]
-    xc = x.detach().contiguous()
-    wc = weight.detach().contiguous()
+    lib, xc, wc, (e, kk, d, n) = call
     out = torch.empty((e, n) if k == 1 else (e, n, 2), dtype=torch.long)
     fn = lib.somtorch_bmu_f32 if x.dtype == torch.float32 else lib.somtorch_bmu_f64
     rc = fn(xc.data_ptr(), 0 if x.ndim == 2 else n * d, wc.data_ptr(), e, n, kk, d, k, out.data_ptr(),
@@ -260,20 +266,10 @@ def native_accumulate(x: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tens
         ``x`` ``(N, D)`` or ``(E, N, D)``, ``weight`` ``(E, K, D)`` → sums ``(E, K, D)``, counts
         ``(E, K)``, both in the dtype of ``weight``.
     """
-    if not enabled():
-        _note(f"{ENV_SWITCH}=0", logging.INFO)
+    call = _prepare(x, weight, 1)
+    if call is None:
         return None
-    reason = _unsupported(x, weight, 1)
-    if reason is not None:
-        _note(reason)
-        return None
-    lib = library()
-    if lib is None:
-        return None
-    e, kk, d = weight.shape
-    n = x.shape[-2]
-    xc = x.detach().contiguous()
-    wc = weight.detach().contiguous()
+    lib, xc, wc, (e, kk, d, n) = call
     sums = torch.zeros(e, kk, d, dtype=weight.dtype)
     counts = torch.zeros(e, kk, dtype=torch.long)
     fn = lib.somtorch_accumulate_f32 if x.dtype == torch.float32 else lib.somtorch_accumulate_f64
