@@ -25,6 +25,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from experiments.schema import RunConfig
 
+# absolute, so that the console script and python -m find the same configs from any directory
+CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("somtorch.real_scenes")
 
 DEFAULT_SCENES = [
@@ -113,7 +115,7 @@ def to_markdown(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="real_scenes")
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="real_scenes")
 def main(dcfg: DictConfig) -> dict:
     from somtorch.atomic import write_bytes, write_json
 

@@ -28,6 +28,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from experiments.schema import RunConfig, register
 
+# absolute, so that the console script and python -m find the same configs from any directory
+CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("somtorch.run")
 register()
 
@@ -137,7 +139,7 @@ def _log_hparams(writer, cfg: RunConfig, metrics: dict) -> None:
     writer.add_hparams(hp, res, run_name=".")
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="run")
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="run")
 def main(dcfg: DictConfig) -> dict:
     """Hydra entry point."""
     cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules

@@ -164,3 +164,13 @@ def test_bad_som_value_fails_and_leaves_no_output(tmp_path):
     proc = _run(run_dir, "som.rows=0")
     assert proc.returncode != 0 and "rows" in proc.stderr
     assert _our_files(run_dir) == []
+
+
+def test_console_script_composes_from_any_directory(tmp_path):
+    exe = Path(sys.executable).parent / "somtorch-run"
+    if not exe.exists():
+        pytest.skip(f"console script not installed next to {sys.executable} (pip install -e . creates it)")
+    proc = subprocess.run([str(exe), "--cfg", "job", "som.rows=3"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "rows: 3" in proc.stdout and "source: motorcycle" in proc.stdout
