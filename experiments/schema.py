@@ -33,6 +33,14 @@ class DataConfig:
     right: Optional[str] = MISSING
     sgbm: dict[str, Any] = field(default_factory=dict)
     name: Optional[str] = None
+    # camera of a stereo pair (point clouds need it): focal length and principal point in px,
+    # baseline in baseline_unit; cx/cy default to the image centre
+    focal_px: Optional[float] = None
+    baseline: Optional[float] = None
+    baseline_unit: str = "m"
+    cx: Optional[float] = None
+    cy: Optional[float] = None
+    doffs: float = 0.0
 
 
 @dataclass

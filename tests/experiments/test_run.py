@@ -174,3 +174,29 @@ def test_console_script_composes_from_any_directory(tmp_path):
                           timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "rows: 3" in proc.stdout and "source: motorcycle" in proc.stdout
+
+
+def test_stereo_pair_with_camera_gives_point_clouds(shared_data, tmp_path):
+    toy = shared_data / "oakd_stereodemo" / "toy"
+    proc = subprocess.run(
+        [sys.executable, "-m", "experiments.run", f"hydra.run.dir={tmp_path}", "data=stereo_pair",
+         f"data.left={toy / 'left.png'}", f"data.right={toy / 'right.png'}", "data.focal_px=451.03",
+         "data.baseline=0.075", "output.render=false", "output.tensorboard=false", "train.epochs=3"],
+        cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    pc = m["pointcloud"]
+    assert pc["written"] and pc["unit"] == "m"
+    assert pc["points_full"] == m["scene"]["valid_pixels"]  # SGBM's valid pixels, one point each
+    assert 0 < pc["points_reduced"] <= pc["points_full"]
+    assert len(read_ply(tmp_path / "cloud_reduced.ply")) == pc["points_reduced"]
+
+
+def test_stereo_pair_with_half_a_camera_fails_before_output(shared_data, tmp_path):
+    toy = shared_data / "oakd_stereodemo" / "toy"
+    proc = subprocess.run(
+        [sys.executable, "-m", "experiments.run", f"hydra.run.dir={tmp_path}", "data=stereo_pair",
+         f"data.left={toy / 'left.png'}", f"data.right={toy / 'right.png'}", "data.focal_px=451.03"],
+        cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0 and "data.baseline" in proc.stderr
+    assert not (tmp_path / "metrics.json").exists()
