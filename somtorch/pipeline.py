@@ -142,7 +142,7 @@ class PipelineResult:
     features: Features
     train_features: Features
     som: SOM
-    labels: torch.Tensor  # (E, H, W)
+    labels: torch.Tensor  # (E, H, W) BMU per pixel; -1 = not segmented (invalid or ground plane)
     ref_disparity: torch.Tensor  # (E, K) px
     members: list[MemberResult]
     timings: dict[str, float]
@@ -165,7 +165,7 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         metrics: compute quantization and topographic error of the trained maps.
         log_training: called as ``log_training(tag, value, epoch)`` once per epoch with the mean
             quantization / topographic error of the members (e.g. ``SummaryWriter.add_scalar``);
-            its cost is not part of the ``train`` timing only approximately (it runs inside ``fit``).
+            it runs inside ``fit``, so its cost is included in the ``train`` timing.
     """
     cfg = cfg or PipelineConfig()
     check_positive_int("ensemble", cfg.ensemble)
