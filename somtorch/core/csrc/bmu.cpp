@@ -196,38 +196,60 @@ void run_acc(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int
   constexpr int TW = U * Lanes<T>::W;
   const int64_t tiles = (N + TW - 1) / TW;
   const bool shared = x_stride == 0;
-  nthreads = clamp_threads(nthreads, (double)E * (double)N * (double)K * (double)D, E);
+  nthreads = clamp_threads(nthreads, (double)E * (double)N * (double)K * (double)D, (E + 3) / 4);
   std::vector<T> xt;  // shared x: all tiles transposed once, tile t at xt[t * D * TW]
   if (shared) {
     xt.resize((size_t)(tiles * D * TW));
     for (int64_t t = 0; t < tiles; ++t)
       load_tile<T, DC>(x + t * TW * D, N - t * TW < TW ? N - t * TW : TW, D, xt.data() + t * D * TW);
   }
+  // Members are taken G at a time and their sums interleaved sample by sample: each member's (and
+  // each unit's) additions stay in sample order, but the G chains of dependent adds — long ones on
+  // spatially coherent data, where neighbours share a unit — overlap instead of waiting on each other.
+  constexpr int64_t G = 4;
+  const int64_t groups = (E + G - 1) / G;
 #pragma omp parallel num_threads(nthreads) if (nthreads > 1)
   {
     std::vector<T> xs_buf(shared ? 0 : (size_t)D * TW);
-    alignas(32) Idx i1[TW];
+    alignas(32) Idx i1[G][TW];
 #pragma omp for schedule(dynamic, 1)
-    for (int64_t e = 0; e < E; ++e) {
-      const T* we = w + e * K * D;
-      const T* xe = x + e * x_stride;
-      T* se = sums + e * K * D;
-      int64_t* ce = counts + e * K;
+    for (int64_t grp = 0; grp < groups; ++grp) {
+      const int64_t e0 = grp * G;
+      const int64_t ge = E - e0 < G ? E - e0 : G;
       for (int64_t t = 0; t < tiles; ++t) {
         const int64_t n0 = t * TW;
         const int64_t nv = N - n0 < TW ? N - n0 : TW;
-        const T* xs = xt.data() + t * D * TW;
-        if (!shared) {
-          load_tile<T, DC>(xe + n0 * D, nv, D, xs_buf.data());
-          xs = xs_buf.data();
+        for (int64_t g = 0; g < ge; ++g) {
+          const int64_t e = e0 + g;
+          const T* xs = xt.data() + t * D * TW;
+          if (!shared) {
+            load_tile<T, DC>(x + e * x_stride + n0 * D, nv, D, xs_buf.data());
+            xs = xs_buf.data();
+          }
+          tile<T, DC, false>(xs, w + e * K * D, K, D, i1[g], nullptr);
         }
-        tile<T, DC, false>(xs, we, K, D, i1, nullptr);
-        for (int64_t j = 0; j < nv; ++j) {
-          const int64_t k = i1[j];
-          const T* row = xe + (n0 + j) * D;
-          T* sk = se + k * D;
-          for (int64_t d = 0; d < (DC > 0 ? DC : D); ++d) sk[d] += row[d];
-          ce[k] += 1;
+        if (ge == G) {
+          for (int64_t j = 0; j < nv; ++j) {
+            for (int64_t g = 0; g < G; ++g) {
+              const int64_t e = e0 + g;
+              const int64_t k = i1[g][j];
+              const T* row = x + e * x_stride + (n0 + j) * D;
+              T* sk = sums + (e * K + k) * D;
+              for (int64_t d = 0; d < (DC > 0 ? DC : D); ++d) sk[d] += row[d];
+              counts[e * K + k] += 1;
+            }
+          }
+        } else {
+          for (int64_t j = 0; j < nv; ++j) {
+            for (int64_t g = 0; g < ge; ++g) {
+              const int64_t e = e0 + g;
+              const int64_t k = i1[g][j];
+              const T* row = x + e * x_stride + (n0 + j) * D;
+              T* sk = sums + (e * K + k) * D;
+              for (int64_t d = 0; d < (DC > 0 ? DC : D); ++d) sk[d] += row[d];
+              counts[e * K + k] += 1;
+            }
+          }
         }
       }
     }
