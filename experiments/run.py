@@ -78,8 +78,9 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     scene = load_input(cfg)
     if cfg.object_id is not None and scene.objects is None:
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
-    if not 0 <= cfg.output.member < cfg.ensemble:
-        raise ValueError(f"output.member={cfg.output.member} must be in [0, ensemble={cfg.ensemble})")
+    if not 0 <= cfg.output.member < cfg.runs:
+        raise ValueError(f"output.member={cfg.output.member} must be in [0, runs={cfg.runs}) (ensemble="
+                         f"{cfg.ensemble}, method={cfg.method!r})")
     out_dir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     writer = None
@@ -100,7 +101,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
             metrics["pointcloud"] = write_point_clouds(
                 scene, result, stage, member=cfg.output.member, voxel_size=cfg.output.voxel_size,
                 render=cfg.output.render, render_backend=cfg.output.render_backend)
-        if cfg.output.checkpoint:
+        if cfg.output.checkpoint and result.som is not None:
             result.som.save(stage / "som.safetensors")
         if writer is not None:
             _log_hparams(writer, cfg, metrics)

@@ -72,6 +72,7 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "score": m.score.as_dict() if m.score is not None else None,
         })
     out: dict[str, Any] = {
+        "method": result.method,
         "scene": {"name": scene.name, "height": scene.height, "width": scene.width,
                   "valid_pixels": scene.n_valid, "removed_pixels": result.features.n_invalid,
                   "has_objects": scene.objects is not None, "source": scene.source},
@@ -110,7 +111,7 @@ def write_maps(scene: Scene, result: PipelineResult, out_dir: Path, member: int 
     """Write the pictures of one member (PNG) and the reduced map (NPZ); returns the pictures."""
     e = member
     lab = result.labels[e]
-    k = result.som.num_neurons
+    k = result.num_segments
     lo, hi = result.members[e].stats.d_range
     back = viz.image_or_disparity(scene.image, scene.disparity, scene.valid)
     m = result.members[e]
@@ -118,13 +119,14 @@ def write_maps(scene: Scene, result: PipelineResult, out_dir: Path, member: int 
         "disparity": viz.colorize(scene.disparity, scene.valid),
         "segments_grey": viz.grey(grey_map(lab[None], result.ref_disparity[e:e + 1])[0], lo=lo, hi=hi),
         "segments_color": color_map(lab[None], k, seed=0)[0].numpy(),
-        "reference_vectors": viz.draw_reference_vectors(
-            viz.colorize(scene.disparity, scene.valid),
-            result.features.to_pixel_units(result.som.weight.detach()[e]), result.som.grid_d2),
         "areas": viz.draw_areas(back, lab, [a.neurons for a in m.kept], m.reduction.boxes,
                                 scene.main_object_mask if scene.objects is not None else None),
         "reduced_disparity": viz.colorize(scene.disparity, scene.valid & m.reduction.mask, lo=lo, hi=hi),
     }
+    if result.som is not None:
+        pics["reference_vectors"] = viz.draw_reference_vectors(
+            viz.colorize(scene.disparity, scene.valid),
+            result.features.to_pixel_units(result.som.weight.detach()[e]), result.som.grid_d2)
     for name, img in pics.items():
         viz.save_png(img, out_dir / f"{name}.png")
     with atomic_path(out_dir / "reduced.npz") as tmp:

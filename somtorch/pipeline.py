@@ -4,6 +4,18 @@
 returns, per member, the label map, all object areas, the kept ones, the reduced map and, when the
 scene has an object mask, the score. Point clouds and files are produced by the callers
 (``experiments/run.py``), so this module stays free of I/O.
+
+``method`` swaps the segmenter of step 1b while every other step stays the same, so baselines are
+scored exactly like the SOM:
+
+* ``"som"`` — our SOM (``som``/``train`` groups), E members trained as one tensor op;
+* ``"minisom"`` — the MiniSom library the paper cites, one map per seed (online rule only);
+* ``"kmeans"`` — Lloyd's k-means on the same features with K = rows·cols, batched over seeds;
+* ``"slic"`` / ``"felzenszwalb"`` — scikit-image superpixels of the disparity image (deterministic:
+  one run whatever ``ensemble`` says).
+
+Methods without a SOM grid (k-means, superpixels) link segments through the image only
+(``objects.link="grid"`` acts as ``"image"`` for them).
 """
 
 from __future__ import annotations
@@ -32,6 +44,9 @@ from .core.neighborhood import NEIGHBORHOODS
 from .core.som import MODES, ORDERS
 from .disparity.features import NORMALIZATIONS
 from .validation import check_choice, check_positive, check_positive_int
+
+METHODS = ("som", "minisom", "kmeans", "slic", "felzenszwalb")
+DETERMINISTIC_METHODS = ("slic", "felzenszwalb")
 
 
 @dataclass
@@ -107,7 +122,36 @@ class ReductionConfig:
 
 
 @dataclass
+class BaselineConfig:
+    """Parameters of the baseline segmenters (``method`` other than ``"som"``).
+
+    ``n_segments`` (superpixels) defaults to the SOM's K = rows·cols so that every method splits the
+    map into about as many segments; k-means always uses K centres.
+    """
+
+    kmeans_iterations: int = 20
+    kmeans_init: str = "kmeans++"
+    n_segments: int | None = None
+    slic_compactness: float = 0.1
+    fz_scale: float = 100.0
+    fz_sigma: float = 0.5
+    fz_min_size: int = 50
+
+    def __post_init__(self) -> None:
+        check_positive_int("baseline.kmeans_iterations", self.kmeans_iterations)
+        check_choice("baseline.kmeans_init", self.kmeans_init, ("kmeans++", "sample"))
+        if self.n_segments is not None:
+            check_positive_int("baseline.n_segments", self.n_segments)
+        check_positive("baseline.slic_compactness", self.slic_compactness)
+        check_positive("baseline.fz_scale", self.fz_scale)
+        check_positive("baseline.fz_sigma", self.fz_sigma, allow_zero=True)
+        check_positive_int("baseline.fz_min_size", self.fz_min_size)
+
+
+@dataclass
 class PipelineConfig:
+    method: str = "som"
+    baseline: BaselineConfig = field(default_factory=BaselineConfig)
     features: FeatureConfig = field(default_factory=FeatureConfig)
     som: SOMConfig = field(default_factory=SOMConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
@@ -119,7 +163,13 @@ class PipelineConfig:
     object_id: int | None = None  # scored object; None = the scene's main object(s)
 
     def __post_init__(self) -> None:
+        check_choice("method", self.method, METHODS)
         check_positive_int("ensemble", self.ensemble)
+
+    @property
+    def runs(self) -> int:
+        """Members actually computed: ``ensemble``, or 1 for a deterministic method."""
+        return 1 if self.method in DETERMINISTIC_METHODS else self.ensemble
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -141,14 +191,20 @@ class MemberResult:
 class PipelineResult:
     features: Features
     train_features: Features
-    som: SOM
-    labels: torch.Tensor  # (E, H, W) BMU per pixel; -1 = not segmented (invalid or ground plane)
+    som: SOM | None  # the trained maps (method "som" / "minisom"); None for the other methods
+    labels: torch.Tensor  # (E, H, W) segment per pixel; -1 = not segmented (invalid or ground plane)
     ref_disparity: torch.Tensor  # (E, K) px
     members: list[MemberResult]
     timings: dict[str, float]
     quantization_error: torch.Tensor
     topographic_error: torch.Tensor
     ground: GroundPlane | None = None
+    method: str = "som"
+    prototypes: torch.Tensor | None = None  # (E, K, D) feature-space centres (SOM weights, k-means)
+
+    @property
+    def num_segments(self) -> int:
+        return int(self.ref_disparity.shape[-1])
 
 
 def _tic() -> float:
@@ -187,36 +243,71 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     t["features"] = _tic() - t0
 
     t0 = _tic()
-    s = cfg.som
-    som = SOM(s.rows, s.cols, 3, ensemble=cfg.ensemble, topology=s.topology, toroidal=s.toroidal, seed=cfg.seed)
-    tc = cfg.train
-    callback = None
-    if log_training is not None:
-        def callback(info: StepInfo) -> None:
-            log_training("train/quantization_error", float(som.quantization_error(train.x).mean()),
-                         round(info.epoch))
-            log_training("train/topographic_error", float(som.topographic_error(train.x).mean()),
-                         round(info.epoch))
-            log_training("train/sigma", float(info.sigma.mean()), round(info.epoch))
-    som.fit(train.x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
-            sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, order=tc.order,
-            batch_size=tc.batch_size, init=s.init, progress=progress, callback=callback)
+    som, weight, grid_d2, labels = None, None, None, None
+    s, tc, runs = cfg.som, cfg.train, cfg.runs
+    if cfg.method == "som":
+        som = SOM(s.rows, s.cols, 3, ensemble=runs, topology=s.topology, toroidal=s.toroidal, seed=cfg.seed)
+        callback = None
+        if log_training is not None:
+            def callback(info: StepInfo) -> None:
+                log_training("train/quantization_error", float(som.quantization_error(train.x).mean()),
+                             round(info.epoch))
+                log_training("train/topographic_error", float(som.topographic_error(train.x).mean()),
+                             round(info.epoch))
+                log_training("train/sigma", float(info.sigma.mean()), round(info.epoch))
+        som.fit(train.x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
+                sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, order=tc.order,
+                batch_size=tc.batch_size, init=s.init, progress=progress, callback=callback)
+    elif cfg.method == "minisom":
+        from .baselines.minisom_som import train_minisom
+
+        if tc.mode != "online":
+            raise ValueError(f"method='minisom' trains with MiniSom's online rule; got train.mode={tc.mode!r} "
+                             "(use train=online)")
+        som = SOM(s.rows, s.cols, 3, ensemble=runs, topology=s.topology, toroidal=s.toroidal, seed=cfg.seed)
+        som.weight = train_minisom(train.x, s.rows, s.cols, seeds=som.seeds, epochs=tc.epochs, sigma=tc.sigma,
+                                   lr=tc.lr, order=tc.order, neighborhood=tc.neighborhood,
+                                   init="pca" if s.init == "pca" else "sample").to(som.weight)
+    elif cfg.method == "kmeans":
+        from .baselines.kmeans import kmeans
+
+        weight = kmeans(train.x, s.rows * s.cols, ensemble=runs, seed=cfg.seed,
+                        iterations=cfg.baseline.kmeans_iterations, init=cfg.baseline.kmeans_init).centers
+    else:
+        from .baselines.superpixels import superpixel_labels
+
+        b = cfg.baseline
+        labels = superpixel_labels(scene.disparity, usable, method=cfg.method,
+                                   n_segments=b.n_segments or s.rows * s.cols, compactness=b.slic_compactness,
+                                   scale=b.fz_scale, sigma=b.fz_sigma, min_size=b.fz_min_size)[None]
+    if som is not None:
+        weight, grid_d2 = som.weight.detach(), som.grid_d2
     t["train"] = _tic() - t0
 
     t0 = _tic()
-    weight = som.weight.detach()
-    labels = segment(weight, feats.x, feats.pixels, feats.shape)
+    if weight is not None:
+        labels = segment(weight, feats.x, feats.pixels, feats.shape)
     t["segment"] = _tic() - t0
 
-    ref_d = feats.to_pixel_units(weight)[..., 2]  # (E, K)
+    if weight is not None:
+        ref_d = feats.to_pixel_units(weight)[..., 2]  # (E, K)
+    else:  # superpixels: a segment's reference disparity is its mean disparity
+        k = int(labels.max()) + 1
+        lab = labels[0]
+        ok = lab >= 0
+        cnt = torch.bincount(lab[ok], minlength=k).double()
+        ref_d = (torch.bincount(lab[ok], weights=scene.disparity[ok].double(), minlength=k)
+                 / cnt.clamp_min(1)).float()[None]
+    num_k = int(ref_d.shape[-1])
+    seeds = som.seeds if som is not None else [cfg.seed + e for e in range(runs)]
     obj_mask = None
     if scene.objects is not None:
         obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
     members, t_obj, t_red = [], 0.0, 0.0
-    for e in range(cfg.ensemble):
+    for e in range(runs):
         t0 = _tic()
-        stats = neuron_stats(labels[e], scene.disparity, som.num_neurons)
-        areas = find_object_areas(ref_d[e], som.grid_d2, stats, cfg.objects)
+        stats = neuron_stats(labels[e], scene.disparity, num_k)
+        areas = find_object_areas(ref_d[e], grid_d2, stats, cfg.objects)
         kept = select_areas(areas, stats, cfg.objects)
         if cfg.objects.grow:
             kept = [grow_area(a, labels[e], scene.disparity, usable, stride=cfg.objects.grow_stride) for a in kept]
@@ -229,11 +320,13 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         t_red += _tic() - t1
         t_obj += t1 - t0
         score = score_reduction(red, obj_mask, scene.valid) if obj_mask is not None else None
-        members.append(MemberResult(som.seeds[e], areas, kept, red, score, stats))
+        members.append(MemberResult(seeds[e], areas, kept, red, score, stats))
     t["objects"] = t_obj
     t["reduction"] = t_red
-    if metrics:
+    qe = te = torch.full((runs,), float("nan"))
+    if metrics and som is not None:
         qe, te = som.quantization_error(train.x), som.topographic_error(train.x)
-    else:
-        qe = te = torch.full((cfg.ensemble,), float("nan"))
-    return PipelineResult(feats, train, som, labels, ref_d, members, t, qe, te, ground)
+    elif metrics and weight is not None:
+        from .core.metrics import quantization_error
+        qe = quantization_error(train.x, weight)
+    return PipelineResult(feats, train, som, labels, ref_d, members, t, qe, te, ground, cfg.method, weight)

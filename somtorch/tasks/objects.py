@@ -212,13 +212,15 @@ def _components(adj: torch.Tensor) -> list[list[int]]:
     return comps
 
 
-def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor, stats: NeuronStats,
+def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None, stats: NeuronStats,
                       cfg: AreaConfig | None = None) -> list[ObjectArea]:
     """All object areas of one SOM (connected components of similar, grid-adjacent neurons).
 
     Args:
         ref_disparity: reference disparity of each neuron in px ``(K,)``.
-        grid_d2: squared grid distances ``(K, K)`` of the SOM (adjacent = 1, diagonal = 2).
+        grid_d2: squared grid distances ``(K, K)`` of the SOM (adjacent = 1, diagonal = 2), or None
+            for segmenters without a grid (k-means, superpixels): their segments link through the
+            image only, whatever ``cfg.link`` says.
         stats: :func:`neuron_stats` of the member's label map.
         cfg: recognition parameters.
 
@@ -229,11 +231,13 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor, stats:
     tau = cfg.similarity * stats.spread(cfg.spread)
     reach = 1.0 + 1e-6 if cfg.connectivity == 4 else 2.0 + 1e-6
     ref = ref_disparity.double().cpu()
-    near = grid_d2.cpu() <= reach
-    if cfg.link != "grid":
+    link = cfg.link if grid_d2 is not None else "image"
+    if grid_d2 is not None:
+        near = grid_d2.cpu() <= reach
+    if link != "grid":
         per = stats.perimeter.clamp_min(1.0)
         touch = stats.boundary >= cfg.min_boundary * torch.minimum(per[:, None], per[None, :])
-        near = touch if cfg.link == "image" else near | touch
+        near = touch if link == "image" else near | touch
     adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
     adj.fill_diagonal_(False)
     total = float(stats.count.sum())

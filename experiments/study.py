@@ -1,0 +1,374 @@
+"""``python -m experiments.study``: one job of a study = one configuration run ``ensemble`` times.
+
+A study is a Hydra sweep (``conf/experiment/<name>.yaml``: table1, table2, runtime, stability,
+grid, baselines, optuna); each job scores ``ensemble`` executions (seeds ``seed … seed+ensemble−1``)
+of one configuration and writes ``metrics.json`` (per-run values, summary, timings) plus TensorBoard
+events with the hparams plugin. ``python -m experiments.aggregate <sweep dir>`` turns the
+``metrics.json`` files of a sweep into the paper's tables and plots.
+
+Executions: ``execution=ensemble`` (default) trains all runs as ONE ensemble (one tensor op);
+``execution=separate`` runs them one after another as the paper did (each member of an ensemble is
+bitwise the separate run with its seed, so both give the same per-run results; only time differs).
+
+Fault tolerance: the sweep directory is fixed by the study name and every job's folder by its
+overrides, and ``metrics.json`` is written last and atomically. Re-running a killed sweep with the
+same command skips every job whose ``metrics.json`` is complete and was made by the same config
+(``config_hash``), recomputes the others and loses nothing.
+
+    python -m experiments.study +experiment=table1
+    python -m experiments.study +experiment=runtime
+    python -m experiments.study data=kitti2015 ensemble=20 +preset=paper      # one job
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import os
+import platform
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Optional
+
+import hydra
+from hydra.core.config_store import ConfigStore
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig, OmegaConf
+
+from experiments.run import CONF_DIR, load_input
+from experiments.schema import RunConfig, register
+
+log = logging.getLogger("somtorch.study")
+register()
+EXECUTIONS = ("ensemble", "separate")
+SCHEMA = "somtorch.study/1"
+
+
+@dataclass
+class StudyConfig(RunConfig):
+    """A study job: the run config plus how the runs are executed and measured.
+
+    Attributes:
+        study: the study's name (``table1``, ``runtime``, …); names the sweep folder.
+        execution: ``"ensemble"`` (all runs in one tensor op) or ``"separate"`` (one pipeline call
+            per seed, as in the paper; per-run runtimes are then measured, not amortised).
+        repeats: the whole job is timed this many times (runtime study; after one untimed warm-up run);
+            results come from the first.
+        resize: ``[width, height]``: resample the scene first (nearest-neighbour disparity, scaled).
+        skip_complete: skip the job if its folder holds a complete ``metrics.json`` of the same config.
+    """
+
+    study: str = "adhoc"
+    execution: str = "ensemble"
+    repeats: int = 1
+    resize: Optional[list[int]] = None
+    skip_complete: bool = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        from somtorch.validation import check_choice, check_positive_int
+
+        check_choice("execution", self.execution, EXECUTIONS)
+        check_positive_int("repeats", self.repeats)
+        if self.resize is not None and (len(self.resize) != 2 or min(self.resize) < 1):
+            raise ValueError(f"resize must be [width, height] with positive sizes; got {self.resize}")
+
+
+ConfigStore.instance().store(name="study_schema", node=StudyConfig)
+
+# keys that do not change a job's results (where files go, whether to skip)
+_UNHASHED = ("paths", "output", "skip_complete", "study", "repeats")
+
+
+def config_hash(config: dict[str, Any]) -> str:
+    """SHA-256 of the result-relevant part of a resolved config (stable key order)."""
+    relevant = {k: v for k, v in config.items() if k not in _UNHASHED}
+    return hashlib.sha256(json.dumps(relevant, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def complete_metrics(path: Path, chash: str) -> dict | None:
+    """The metrics of a finished job in ``path`` made by the config with hash ``chash``, else None."""
+    f = path / "metrics.json"
+    try:
+        m = json.loads(f.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(m, dict) or m.get("schema") != SCHEMA or m.get("config_hash") != chash:
+        return None
+    return m
+
+
+def _segment_f1(labels, obj) -> tuple[float, float, float]:
+    """Segmentation precision against the object mask: the union of the segments whose pixels are
+    mostly object pixels, scored as precision / recall / F1 of the object's valid pixels. Finer
+    segmentations follow the object's outline more closely (the paper's Fig. 13)."""
+    import torch
+
+    ok = labels >= 0
+    lab = labels[ok]
+    o = obj[ok]
+    k = int(lab.max()) + 1 if lab.numel() else 1
+    cnt = torch.bincount(lab, minlength=k)
+    hit = torch.bincount(lab[o], minlength=k)
+    major = hit * 2 > cnt
+    sel = major[lab]
+    tp = int((sel & o).sum())
+    p = tp / max(int(sel.sum()), 1)
+    r = tp / max(int(o.sum()), 1)
+    return p, r, (2 * p * r / (p + r) if p + r > 0 else 0.0)
+
+
+def _run_records(scene, result, obj_mask, per_run_s: list[float] | None) -> dict[str, list]:
+    """Per-run values of one pipeline result (one entry per member)."""
+    import torch
+
+    runs: dict[str, list] = {k: [] for k in (
+        "seed", "identified_fraction", "identified_100", "identified_95", "useful_hit", "reduction_union",
+        "reduction_crops", "kept_areas", "area_px", "area_frac", "area_precision", "segment_precision",
+        "segment_recall", "segment_f1", "n_areas", "quantization_error", "topographic_error", "runtime_s")}
+    t = result.timings
+    e_n = len(result.members)
+    shared = sum(v for k, v in t.items() if k not in ("objects", "reduction")) / e_n
+    own = (t.get("objects", 0.0) + t.get("reduction", 0.0)) / e_n
+    for e, m in enumerate(result.members):
+        runs["seed"].append(m.seed)
+        runs["n_areas"].append(len(m.areas))
+        runs["kept_areas"].append(len(m.kept))
+        area_mask = torch.zeros_like(scene.valid)
+        for a in m.kept:
+            area_mask |= a.mask(result.labels[e])
+        px = int(area_mask.sum())
+        runs["area_px"].append(px)
+        runs["area_frac"].append(px / max(scene.n_valid, 1))
+        runs["reduction_union"].append(m.reduction.reduction_union)
+        runs["reduction_crops"].append(m.reduction.reduction_crops)
+        q, te = float(result.quantization_error[e]), float(result.topographic_error[e])
+        runs["quantization_error"].append(q if q == q else None)
+        runs["topographic_error"].append(te if te == te else None)
+        runs["runtime_s"].append(per_run_s[e] if per_run_s is not None else shared + own)
+        if obj_mask is not None:
+            s = m.score
+            obj = obj_mask & scene.valid
+            runs["identified_fraction"].append(s.identified_fraction)
+            runs["identified_100"].append(s.identified_100)
+            runs["identified_95"].append(s.identified_95)
+            runs["useful_hit"].append(s.useful_hit)
+            runs["area_precision"].append(int((area_mask & obj).sum()) / px if px else 0.0)
+            p, r, f1 = _segment_f1(result.labels[e], obj)
+            runs["segment_precision"].append(p)
+            runs["segment_recall"].append(r)
+            runs["segment_f1"].append(f1)
+    return {k: v for k, v in runs.items() if v}
+
+
+def _merge_runs(parts: list[dict[str, list]]) -> dict[str, list]:
+    out: dict[str, list] = {}
+    for p in parts:
+        for k, v in p.items():
+            out.setdefault(k, []).extend(v)
+    return out
+
+
+def _stats(values: list[float]) -> dict[str, Any]:
+    import numpy as np
+
+    if not values:
+        return {"n": 0, "min": None, "mean": None, "max": None, "median": None}
+    a = np.asarray(values, dtype=np.float64)
+    return {"n": int(a.size), "min": float(a.min()), "mean": float(a.mean()), "max": float(a.max()),
+            "median": float(np.median(a))}
+
+
+def summarize_runs(runs: dict[str, list], x_opt: float | None) -> dict[str, Any]:
+    """The Table 1 / Table 2 numbers of one job from its per-run values."""
+    n = len(runs["seed"])
+    out: dict[str, Any] = {"runs": n, "reduction_all": _stats(runs["reduction_union"]),
+                           "runtime_s": _stats(runs["runtime_s"]), "area_frac": _stats(runs["area_frac"])}
+    if "identified_fraction" not in runs:
+        return out
+    id100, id95, useful = runs["identified_100"], runs["identified_95"], runs["useful_hit"]
+    pick = lambda key, flags: [v for v, f in zip(runs[key], flags) if f]  # noqa: E731
+    tradeoff = [f * max(0.0, min(1.0, r / x_opt)) if x_opt else 0.0
+                for f, r in zip(id95, runs["reduction_union"])]
+    out.update({
+        "identified_100": int(sum(id100)), "identified_95": int(sum(id95)), "useful_hits": int(sum(useful)),
+        "x_opt": x_opt,
+        "mean_identified_fraction": float(sum(runs["identified_fraction"]) / n),
+        # Table 2: over the runs with complete identification (the paper), and over the >= 95 % runs
+        "reduction_complete": _stats(pick("reduction_union", id100)),
+        "reduction_crops_complete": _stats(pick("reduction_crops", id100)),
+        "reduction_95": _stats(pick("reduction_union", id95)),
+        "reduction_crops_95": _stats(pick("reduction_crops", id95)),
+        "segment_f1": _stats(runs["segment_f1"]), "area_precision": _stats(runs["area_precision"]),
+        # in [0, 1]: mean over runs of [>= 95 % identified] * min(1, reduction / x_opt) (Optuna's objective)
+        "tradeoff": float(sum(tradeoff) / n),
+    })
+    return out
+
+
+def _per_object(scene, results: list) -> dict[str, Any]:
+    from somtorch.tasks.scoring import score_reduction
+
+    out = {}
+    for info in scene.object_info:
+        mask = scene.object_mask(info.id)
+        if not bool((mask & scene.valid).any()):
+            continue
+        s = [score_reduction(m.reduction, mask, scene.valid) for r in results for m in r.members]
+        out[str(info.id)] = {"name": info.name, "main": info.main, "identified_95": sum(x.identified_95 for x in s),
+                             "identified_100": sum(x.identified_100 for x in s),
+                             "mean_identified_fraction": sum(x.identified_fraction for x in s) / len(s),
+                             "x_opt": s[0].x_opt}
+    return out
+
+
+def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str, Any]:
+    """Run one study job into ``out_dir`` (see the module docstring); returns its metrics."""
+    import torch
+
+    from somtorch import __version__
+    from somtorch.atomic import write_json
+    from somtorch.disparity.scene import resize_scene
+    from somtorch.outputs import write_maps
+    from somtorch.pipeline import run_pipeline
+
+    chash = config_hash(config)
+    if cfg.skip_complete:
+        done = complete_metrics(out_dir, chash)
+        if done is not None:
+            log.info("skipping %s: complete metrics.json of the same config (hash %s)", out_dir, chash)
+            return done
+    t_start = time.perf_counter()
+    scene = load_input(cfg)  # every file check before any work
+    if cfg.resize is not None:
+        scene = resize_scene(scene, int(cfg.resize[0]), int(cfg.resize[1]))
+    if cfg.object_id is not None and scene.objects is None:
+        raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
+    obj_mask = None
+    if scene.objects is not None:
+        obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
+    writer = None
+    try:
+        repeats: list[dict[str, float]] = []
+        results, per_run_s = [], None
+        if cfg.repeats > 1:  # timing study: one untimed warm-up (kernel compile/load, allocator, caches)
+            run_pipeline(scene, dataclasses.replace(cfg, ensemble=1), metrics=False)
+        for rep in range(cfg.repeats):
+            t0 = time.perf_counter()
+            if cfg.execution == "ensemble" or cfg.runs == 1:
+                res = [run_pipeline(scene, cfg, metrics=True)]
+                times = None
+            else:
+                res, times = [], []
+                for e in range(cfg.runs):
+                    te = time.perf_counter()
+                    solo = dataclasses.replace(cfg, ensemble=1, seed=cfg.seed + e)
+                    res.append(run_pipeline(scene, solo, metrics=True))
+                    times.append(time.perf_counter() - te)
+            wall = time.perf_counter() - t0
+            stages: dict[str, float] = {}
+            for r in res:
+                for k, v in r.timings.items():
+                    stages[k] = stages.get(k, 0.0) + v
+            repeats.append({**stages, "wall": wall})
+            if rep == 0:
+                results, per_run_s = res, times
+        runs = _merge_runs([_run_records(scene, r, obj_mask, None if per_run_s is None else per_run_s[i:i + 1])
+                            for i, r in enumerate(results)])
+        first = results[0].members[0].score
+        x_opt = first.x_opt if first is not None else None
+        metrics: dict[str, Any] = {
+            "schema": SCHEMA, "study": cfg.study, "config_hash": chash, "label": cfg.label,
+            "method": cfg.method, "execution": cfg.execution,
+            "mode": "OR" if cfg.features.train_stride > 1 else "NOR",
+            "grid": f"{cfg.som.rows}x{cfg.som.cols}", "segments": results[0].num_segments,
+            "scene": {"name": cfg.data.name or scene.name, "height": scene.height, "width": scene.width,
+                      "valid_pixels": scene.n_valid, "has_objects": scene.objects is not None,
+                      "object_id": cfg.object_id, "source": scene.source},
+            "pixels": {"train": len(results[0].train_features), "segmented": len(results[0].features),
+                       "train_stride": cfg.features.train_stride},
+            "ground_found": results[0].ground is not None,
+            "runs": runs, "summary": summarize_runs(runs, x_opt),
+            "per_object": _per_object(scene, results) if scene.objects is not None else {},
+            "timings_s": repeats[0], "timings_repeats_s": repeats,
+            "job": _job_info(),
+            "env": {"somtorch": __version__, "torch": torch.__version__, "threads": torch.get_num_threads(),
+                    "python": platform.python_version(), "host": platform.node(),
+                    "native_kernel": os.environ.get("SOMTORCH_NATIVE", "1") != "0"},
+            "config": config,
+        }
+        if cfg.output.maps:
+            write_maps(scene, results[0], stage, member=0)
+        if cfg.output.tensorboard:
+            writer = _tensorboard(stage, cfg, metrics)
+        metrics["wall_s"] = time.perf_counter() - t_start
+        write_json(stage / "metrics.json", metrics)
+        for entry in sorted(stage.iterdir(), key=lambda p: p.name == "metrics.json"):
+            target = out_dir / entry.name  # metrics.json last: its presence marks a complete job
+            if target.is_dir():
+                shutil.rmtree(target)
+            os.replace(entry, target)
+    finally:
+        if writer is not None:
+            writer.close()
+        shutil.rmtree(stage, ignore_errors=True)
+    s = metrics["summary"]
+    if "identified_95" in s:
+        log.info("%s %s %s: >=95 %% %d/%d, 100 %% %d, useful %d, x_opt %.1f %%, %.1f s", metrics["scene"]["name"],
+                 metrics["mode"], cfg.label, s["identified_95"], s["runs"], s["identified_100"], s["useful_hits"],
+                 s["x_opt"], metrics["wall_s"])
+    else:
+        log.info("%s %s: %d runs, %.1f s", metrics["scene"]["name"], metrics["mode"], s["runs"], metrics["wall_s"])
+    return metrics
+
+
+def _job_info() -> dict[str, Any]:
+    try:
+        hc = HydraConfig.get()
+    except ValueError:
+        return {}
+    return {"override_dirname": hc.job.override_dirname, "num": hc.job.get("num"),
+            "overrides": list(hc.overrides.task)}
+
+
+def _tensorboard(stage: Path, cfg: StudyConfig, metrics: dict[str, Any]):
+    import torch
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(str(stage / "tb"))
+    runs = metrics["runs"]
+    for key in ("reduction_union", "area_frac", "runtime_s", "identified_fraction"):
+        if key in runs and runs[key]:
+            writer.add_histogram(f"runs/{key}", torch.tensor(runs[key], dtype=torch.float64), 0)
+    hp = {"scene": metrics["scene"]["name"], "method": cfg.method, "label": cfg.label, "mode": metrics["mode"],
+          "grid": metrics["grid"], "train_mode": cfg.train.mode, "order": cfg.train.order, "init": cfg.som.init,
+          "lr": cfg.train.lr, "sigma": cfg.train.sigma if cfg.train.sigma is not None else -1.0,
+          "tolerance_frac": cfg.reduction.tolerance_frac, "runs": cfg.runs, "execution": cfg.execution}
+    s = metrics["summary"]
+    res = {"hparam/reduction_mean": s["reduction_all"]["mean"], "hparam/runtime_s": s["runtime_s"]["mean"]}
+    if "identified_95" in s:
+        res.update({"hparam/identified_100_rate": s["identified_100"] / s["runs"],
+                    "hparam/identified_95_rate": s["identified_95"] / s["runs"],
+                    "hparam/useful_hit_rate": s["useful_hits"] / s["runs"], "hparam/tradeoff": s["tradeoff"]})
+    writer.add_hparams(hp, res, run_name=".")
+    return writer
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="study")
+def main(dcfg: DictConfig) -> float:
+    """Hydra entry point; returns the job's objective (``summary.tradeoff``; 0 without an object mask)."""
+    cfg: StudyConfig = OmegaConf.to_object(dcfg)
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    metrics = execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
+    return float(metrics["summary"].get("tradeoff", 0.0))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,239 @@
+"""Study jobs, sweeps and their aggregation: real Hydra processes, real launchers (basic, joblib,
+Ray), a sweep killed half-way and resumed, and Optuna."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from experiments.aggregate import aggregate, find_metrics, fit_power
+from experiments.study import SCHEMA, StudyConfig, complete_metrics, config_hash, execute
+
+ROOT = Path(__file__).resolve().parents[2]
+CONF = ROOT / "conf"
+pytestmark = pytest.mark.slow
+
+# a small sweep of 4 jobs on the embedded scene (no shared data needed); each job ~1 s
+SWEEP = ["study=ci", "data=motorcycle", "ensemble=3", "execution=separate", "output.maps=false",
+         "features.train_stride=10,20", "som.rows=3,4", "train.epochs=3"]
+
+
+def _env() -> dict[str, str]:
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    env.pop("HYDRA_FULL_ERROR", None)
+    return env
+
+
+def _study(out: Path, *overrides: str, multirun: bool = True, timeout: int = 300) -> subprocess.CompletedProcess:
+    cmd = [sys.executable, "-m", "experiments.study", *(["-m"] if multirun else []), f"paths.output_dir={out}",
+           *overrides]
+    proc = subprocess.run(cmd, cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, f"exit {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    return proc
+
+
+def _compose(overrides: list[str]) -> StudyConfig:
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="study", overrides=overrides)
+    return cfg
+
+
+def _runs_without_time(m: dict) -> dict:
+    return {k: v for k, v in m["runs"].items() if k != "runtime_s"}
+
+
+def _job_runs(sweep_dir: Path) -> dict[str, dict]:
+    return {str(p.relative_to(sweep_dir)): _runs_without_time(m) for p, m in find_metrics([sweep_dir])}
+
+
+# ----------------------------------------------------------------------------------- one job
+
+
+def test_one_job_on_a_shared_scene_writes_complete_metrics(tmp_path, shared_data):
+    proc = _study(tmp_path, "data=kitti2015", "ensemble=3", f"paths.data_dir={shared_data}", multirun=False)
+    (job,) = [p.parent for p in tmp_path.rglob("metrics.json")]
+    m = json.loads((job / "metrics.json").read_text(), parse_constant=lambda c: pytest.fail(f"non-JSON {c}"))
+    assert m["schema"] == SCHEMA and m["study"] == "adhoc" and m["method"] == "som"
+    assert m["runs"]["seed"] == [0, 1, 2]
+    s = m["summary"]
+    assert s["runs"] == 3
+    assert s["identified_95"] == sum(m["runs"]["identified_95"])
+    assert s["useful_hits"] == sum(m["runs"]["useful_hit"])
+    assert 0 < s["x_opt"] < 100 and 0.0 <= s["tradeoff"] <= 1.0
+    assert set(m["per_object"]) and all(0 <= o["identified_95"] <= 3 for o in m["per_object"].values())
+    assert list((job / "tb").glob("events.out.tfevents*")), "no TensorBoard events"
+    assert (job / "areas.png").is_file()
+    assert not list(job.glob(".partial-*")), "staging folder left behind"
+    assert "kitti2015" in proc.stderr + proc.stdout
+
+
+def test_ensemble_and_separate_executions_give_identical_runs(tmp_path, shared_data):
+    base = ["data=kitti2015", "ensemble=3", f"paths.data_dir={shared_data}", "output.maps=false",
+            "output.tensorboard=false", "som=grid4x7"]
+    ms = {}
+    for ex in ("ensemble", "separate"):
+        dcfg = _compose([*base, f"execution={ex}"])
+        ms[ex] = execute(OmegaConf.to_object(dcfg), tmp_path / ex, OmegaConf.to_container(dcfg, resolve=True))
+    assert _runs_without_time(ms["ensemble"]) == _runs_without_time(ms["separate"])
+    assert ms["ensemble"]["config_hash"] != ms["separate"]["config_hash"]  # execution is part of the config
+
+
+def test_a_complete_job_is_skipped_and_a_changed_config_recomputed(tmp_path):
+    over = ["data=motorcycle", "ensemble=2", "output.maps=false", "output.tensorboard=false", "train.epochs=2"]
+    dcfg = _compose(over)
+    conf = OmegaConf.to_container(dcfg, resolve=True)
+    first = execute(OmegaConf.to_object(dcfg), tmp_path, conf)
+    stamp = (tmp_path / "metrics.json").stat().st_mtime_ns
+    again = execute(OmegaConf.to_object(dcfg), tmp_path, conf)
+    assert again == json.loads((tmp_path / "metrics.json").read_text())
+    assert (tmp_path / "metrics.json").stat().st_mtime_ns == stamp, "a complete job was recomputed"
+    assert again["config_hash"] == first["config_hash"]
+    # a different seed is a different config: recomputed in place
+    dcfg2 = _compose([*over, "seed=5"])
+    other = execute(OmegaConf.to_object(dcfg2), tmp_path, OmegaConf.to_container(dcfg2, resolve=True))
+    assert other["config_hash"] != first["config_hash"] and other["runs"]["seed"] == [5, 6]
+    assert complete_metrics(tmp_path, first["config_hash"]) is None
+    assert complete_metrics(tmp_path, other["config_hash"]) is not None
+
+
+def test_a_truncated_metrics_file_is_not_complete(tmp_path):
+    (tmp_path / "metrics.json").write_text('{"schema": "somtorch.study/1", "config_ha')
+    assert complete_metrics(tmp_path, "x") is None
+
+
+def test_config_hash_ignores_where_files_go():
+    a = {"seed": 0, "paths": {"output_dir": "a"}, "study": "x"}
+    b = {"seed": 0, "paths": {"output_dir": "b"}, "study": "y"}
+    assert config_hash(a) == config_hash(b) != config_hash({**a, "seed": 1})
+
+
+@pytest.mark.parametrize("override, message", [
+    ("execution=bogus", "execution"), ("repeats=0", "repeats"), ("resize=[10]", "resize"),
+    ("method=bogus", "method"), ("baseline.kmeans_init=bogus", "kmeans_init"),
+])
+def test_bad_study_configs_fail_before_any_work(override, message):
+    with pytest.raises(Exception, match=message):
+        OmegaConf.to_object(_compose([override]))
+
+
+# ---------------------------------------------------------------------- sweeps and launchers
+
+
+@pytest.fixture(scope="module")
+def basic_sweep(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("basic")
+    _study(out, *SWEEP)
+    return out / "studies" / "ci"
+
+
+def test_basic_sweep_writes_one_folder_per_job_and_aggregates(basic_sweep, tmp_path):
+    jobs = find_metrics([basic_sweep])
+    assert len(jobs) == 4
+    names = sorted(p.name for p, _ in jobs)
+    assert names[0] == "data=motorcycle,ensemble=3,execution=separate,features.train_stride=10,output.maps=False," \
+                       "som.rows=3,train.epochs=3"
+    written = aggregate([basic_sweep], tmp_path)
+    rows = list(csv.DictReader((tmp_path / "results.csv").open()))
+    assert len(rows) == 4 and {r["grid"] for r in rows} == {"3x8", "4x8"}
+    assert "table1.md" not in written  # the embedded scene has no object mask: nothing to score
+    timing = list(csv.DictReader((tmp_path / "timings.csv").open()))
+    assert all(float(t["wall_s_median"]) > 0 for t in timing)
+
+
+@pytest.mark.parametrize("launcher", ["joblib", "ray"])
+def test_launchers_give_identical_results(launcher, basic_sweep, tmp_path):
+    extra = {"joblib": ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"],
+             "ray": ["hydra/launcher=ray", "+hydra.launcher.ray.init.num_cpus=2",
+                     "+hydra.launcher.ray.init.include_dashboard=false"]}[launcher]
+    proc = _study(tmp_path, *SWEEP, *extra, timeout=600)
+    assert {"joblib": "Joblib", "ray": "Ray"}[launcher] in proc.stdout + proc.stderr  # the launcher really ran
+    other = tmp_path / "studies" / "ci"
+    assert _job_runs(other) == _job_runs(basic_sweep)
+    aggregate([basic_sweep], tmp_path / "a")
+    aggregate([other], tmp_path / "b")
+    assert (tmp_path / "a" / "results.csv").read_text() == (tmp_path / "b" / "results.csv").read_text()
+
+
+def test_a_killed_sweep_resumes_and_loses_nothing(basic_sweep, tmp_path):
+    cmd = [sys.executable, "-m", "experiments.study", "-m", f"paths.output_dir={tmp_path}", *SWEEP]
+    sweep = tmp_path / "studies" / "ci"
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not list(sweep.rglob("metrics.json")):
+            assert proc.poll() is None, "the sweep ended before it could be killed"
+            assert time.monotonic() < deadline, "no job finished in time"
+            time.sleep(0.02)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    done = {p: p.read_bytes() for p in sweep.rglob("metrics.json")}
+    assert 1 <= len(done) < 4, f"{len(done)} jobs complete when killed"
+    for p in done:  # every metrics.json present is complete JSON
+        assert json.loads(p.read_text())["schema"] == SCHEMA
+    rerun = subprocess.run(cmd, cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr[-3000:]
+    assert (rerun.stdout + rerun.stderr).count("skipping") == len(done)
+    for p, content in done.items():
+        assert p.read_bytes() == content, f"{p} was recomputed"
+    assert _job_runs(sweep) == _job_runs(basic_sweep)  # nothing lost, nothing changed
+    assert not list(sweep.rglob(".partial-*"))
+
+
+# --------------------------------------------------------------------------- Table 1 / Optuna
+
+
+def test_table1_sweep_aggregates_into_the_paper_s_tables(tmp_path, shared_data):
+    _study(tmp_path, "+experiment=table1", "data=kitti2015", "features.train_stride=10", "ensemble=2",
+           "train.epochs=3", "output.maps=false", f"paths.data_dir={shared_data}")
+    sweep = tmp_path / "studies" / "table1"
+    jobs = find_metrics([sweep])
+    assert sorted(m["label"] for _, m in jobs) == ["paper", "robust"]
+    aggregate([sweep], tmp_path / "agg")
+    t1 = list(csv.DictReader((tmp_path / "agg" / "table1.csv").open()))
+    by_label = {m["label"]: m for _, m in jobs}
+    for row in t1:
+        s = by_label[row["config"]]["summary"]
+        assert (int(row["identified_100"]), int(row["identified_95"]), int(row["useful_hits"])) == (
+            s["identified_100"], s["identified_95"], s["useful_hits"])
+    md = (tmp_path / "agg" / "table2.md").read_text()
+    assert "NOR stair | 12.56 | 79.13" in md and "kitti2015" in md
+    assert "kitti2015" in (tmp_path / "agg" / "per_object.md").read_text()
+
+
+def test_optuna_sweeper_searches_and_reports_the_best_trade_off(tmp_path, shared_data):
+    _study(tmp_path, "+experiment=optuna", "data=kitti2015", "ensemble=2", "train.epochs=3",
+           "hydra.sweeper.n_trials=3", f"paths.data_dir={shared_data}")
+    result = OmegaConf.load(tmp_path / "studies" / "optuna" / "optimization_results.yaml")
+    assert 0.0 <= float(result.best_value) <= 1.0
+    assert {"train.lr", "train.sigma", "som.rows", "reduction.tolerance_frac"} <= set(result.best_params)
+    values = [m["summary"]["tradeoff"] for _, m in find_metrics([tmp_path / "studies" / "optuna"])]
+    assert len(values) == 3 and max(values) == pytest.approx(float(result.best_value))
+
+
+# ------------------------------------------------------------------------------ aggregation
+
+
+def test_fit_power_recovers_a_known_exponent():
+    px = [1e4, 3e4, 1e5, 3e5, 1e6]
+    b, c = fit_power(px, [2e-6 * n ** 0.8 for n in px])
+    assert b == pytest.approx(0.8, abs=1e-9) and c == pytest.approx(2e-6, rel=1e-6)
+
+
+def test_aggregate_without_metrics_is_a_clear_error(tmp_path):
+    from experiments.aggregate import main
+
+    assert main([str(tmp_path)]) == 2
+    with pytest.raises(FileNotFoundError, match="no such folder"):
+        aggregate([tmp_path / "missing"], tmp_path)
