@@ -320,9 +320,10 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
             writer.close()
         shutil.rmtree(stage, ignore_errors=True)
     s = metrics["summary"]
+    name = cfg.label if cfg.method == "som" else f"{cfg.label}/{cfg.method}"
     if "identified_95" in s:
         log.info("%s %s %s: >=95 %% %d/%d, 100 %% %d, useful %d, x_opt %.1f %%, %.1f s", metrics["scene"]["name"],
-                 metrics["mode"], cfg.label, s["identified_95"], s["runs"], s["identified_100"], s["useful_hits"],
+                 metrics["mode"], name, s["identified_95"], s["runs"], s["identified_100"], s["useful_hits"],
                  s["x_opt"], metrics["wall_s"])
     else:
         log.info("%s %s: %d runs, %.1f s", metrics["scene"]["name"], metrics["mode"], s["runs"], metrics["wall_s"])

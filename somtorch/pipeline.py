@@ -125,17 +125,20 @@ class ReductionConfig:
 class BaselineConfig:
     """Parameters of the baseline segmenters (``method`` other than ``"som"``).
 
-    ``n_segments`` (superpixels) defaults to the SOM's K = rows·cols so that every method splits the
-    map into about as many segments; k-means always uses K centres.
+    ``n_segments`` (SLIC) defaults to the SOM's K = rows·cols so that every method splits the map
+    into about as many segments; k-means always uses K centres. Felzenszwalb has no segment count:
+    ``fz_scale`` 1000 and ``fz_min_size`` 200 px give 55–260 segments on the shared scenes (its
+    scikit-image defaults give 200–700). SLIC's ``slic_compactness`` 0.03 suits a [0, 1] disparity
+    image: at 0.1 the borders follow fewer depth edges, below 0.01 the ground breaks into bands.
     """
 
     kmeans_iterations: int = 20
     kmeans_init: str = "kmeans++"
     n_segments: int | None = None
-    slic_compactness: float = 0.1
-    fz_scale: float = 100.0
+    slic_compactness: float = 0.03
+    fz_scale: float = 1000.0
     fz_sigma: float = 0.5
-    fz_min_size: int = 50
+    fz_min_size: int = 200
 
     def __post_init__(self) -> None:
         check_positive_int("baseline.kmeans_iterations", self.kmeans_iterations)

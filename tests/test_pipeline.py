@@ -125,3 +125,62 @@ def test_a_scene_with_an_object_mask_scores_every_member(shared_data):
         assert m.score.x_opt == pytest.approx(94.3, abs=0.05)
         assert m.score.reduction_union == pytest.approx(m.reduction.reduction_union)
         assert m.score.identified_95 == (m.score.identified_fraction >= 0.95)
+
+
+# ---------------------------------------------------------------------------- baseline methods
+
+
+def _method_cfg(method: str, ensemble: int = 2, **kw) -> PipelineConfig:
+    train = TrainConfig(mode="online" if method == "minisom" else "batch", epochs=2)
+    return PipelineConfig(method=method, som=SOMConfig(rows=3, cols=4), train=train, ensemble=ensemble, seed=SEED,
+                          **kw)
+
+
+@pytest.mark.parametrize("method", ["kmeans", "minisom", "slic", "felzenszwalb"])
+def test_every_baseline_runs_the_same_pipeline(motorcycle, method):
+    from somtorch.pipeline import DETERMINISTIC_METHODS
+
+    res = run_pipeline(motorcycle, _method_cfg(method))
+    runs = 1 if method in DETERMINISTIC_METHODS else 2
+    assert res.method == method and len(res.members) == runs and res.labels.shape[0] == runs
+    k = res.num_segments
+    seg = res.labels >= 0
+    assert int(res.labels.max()) < k and torch.equal(seg[0], seg[-1])
+    assert bool((seg[0] <= motorcycle.valid).all())
+    assert (res.som is not None) == (method == "minisom")
+    lab = res.labels[0][seg[0]]
+    ref = res.ref_disparity[0]
+    used = torch.unique(lab)
+    means = torch.stack([motorcycle.disparity[res.labels[0] == i].mean() for i in used[:5]])
+    if method in DETERMINISTIC_METHODS:  # a superpixel's reference disparity is its mean disparity
+        assert torch.allclose(ref[used[:5]], means, atol=1e-3)
+    for m in res.members:
+        assert m.reduction.mask.shape == motorcycle.valid.shape
+
+
+def test_kmeans_members_equal_solo_runs_and_use_k_equal_rows_times_cols(motorcycle):
+    both = run_pipeline(motorcycle, _method_cfg("kmeans", 2))
+    solo = run_pipeline(motorcycle, PipelineConfig(**{**_method_cfg("kmeans", 1).__dict__, "seed": SEED + 1}))
+    assert both.num_segments == 12
+    assert torch.equal(both.labels[1], solo.labels[0])
+    assert torch.isfinite(both.quantization_error).all() and torch.isnan(both.topographic_error).all()
+
+
+def test_minisom_method_segments_with_minisom_s_own_weights(motorcycle):
+    from somtorch.baselines import train_minisom
+
+    res = run_pipeline(motorcycle, _method_cfg("minisom", 1))
+    w = train_minisom(res.train_features.x, 3, 4, seeds=[SEED], epochs=2, lr=0.5, order="random")
+    assert torch.equal(res.som.weight.detach(), w)
+
+
+def test_minisom_method_needs_the_online_rule(motorcycle):
+    cfg = _method_cfg("minisom")
+    cfg.train = TrainConfig(mode="batch")
+    with pytest.raises(ValueError, match="train.mode"):
+        run_pipeline(motorcycle, cfg)
+
+
+def test_unknown_method_is_rejected():
+    with pytest.raises(ValueError, match="method"):
+        PipelineConfig(method="dbscan")
