@@ -126,7 +126,7 @@ def _csv(rows: list[dict[str, Any]]) -> str:
 
 
 def _sort_key(r: dict) -> tuple:
-    return (r["study"], r["scene"], r["mode"] != "NOR", r["config"], r["grid"], str(r["train_order"]),
+    return (r["study"], r["scene"], r["mode"] != "NOR", r["config"], r["segments"], r["grid"], str(r["train_order"]),
             str(r["init"]), r["train_px"], r["job"])
 
 

@@ -253,6 +253,8 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
     if scene.objects is not None:
         obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
     out_dir.mkdir(parents=True, exist_ok=True)
+    for stale in out_dir.glob(".partial-*"):  # left by a killed attempt of this same job
+        shutil.rmtree(stale, ignore_errors=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     writer = None
     try:
@@ -362,11 +364,23 @@ def _tensorboard(stage: Path, cfg: StudyConfig, metrics: dict[str, Any]):
     return writer
 
 
+def _exit_cleanly_on_sigterm() -> None:
+    """SIGTERM (``kill``, SLURM pre-emption) raises SystemExit, so the staging folder is removed;
+    only possible in the main thread (launchers may run jobs elsewhere)."""
+    import signal
+    import sys
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
+
+
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="study")
 def main(dcfg: DictConfig) -> float:
     """Hydra entry point; returns the job's objective (``summary.tradeoff``; 0 without an object mask)."""
     cfg: StudyConfig = OmegaConf.to_object(dcfg)
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    _exit_cleanly_on_sigterm()
     metrics = execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
     return float(metrics["summary"].get("tradeoff", 0.0))
 

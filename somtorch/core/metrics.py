@@ -29,7 +29,8 @@ def quantization_error(x: torch.Tensor, weight: torch.Tensor, *,
         xs = x[s:s + step] if x.ndim == 2 else x[:, s:s + step]
         b = bmu_search(xs, weight, chunk_elements=chunk_elements)  # (E, n)
         w = gather_weights(weight, b)  # (E, n, D)
-        total += torch.linalg.vector_norm(xs - w, dim=-1).sum(-1).double()
+        # summed in float64, so that the chunking (which depends on E) does not change the float32 result
+        total += torch.linalg.vector_norm(xs - w, dim=-1).double().sum(-1)
     return (total / n).to(weight.dtype)
 
 

@@ -93,3 +93,13 @@ def test_som_methods_equal_functions(setup):
     assert torch.equal(som.quantization_error(x), quantization_error(x, w))
     assert torch.equal(som.topographic_error(xm), topographic_error(xm, w, som.adjacency))
     assert torch.equal(som.umatrix(), umatrix(w, som.adjacency, ROWS, COLS))
+
+
+def test_quantization_error_of_a_member_does_not_depend_on_the_ensemble_size():
+    # the chunk length depends on E; float64 sums keep each member's float32 result unchanged
+    g = torch.Generator().manual_seed(3)
+    x = torch.rand(60_000, 3, generator=g)
+    w = torch.rand(40, 28, 3, generator=g)
+    qe = quantization_error(x, w, chunk_elements=1 << 18)
+    solo = torch.cat([quantization_error(x, w[e:e + 1], chunk_elements=1 << 18) for e in range(40)])
+    assert torch.equal(qe, solo)

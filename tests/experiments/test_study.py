@@ -237,3 +237,17 @@ def test_aggregate_without_metrics_is_a_clear_error(tmp_path):
     assert main([str(tmp_path)]) == 2
     with pytest.raises(FileNotFoundError, match="no such folder"):
         aggregate([tmp_path / "missing"], tmp_path)
+
+
+def test_a_terminated_job_leaves_no_staging_folder_and_reruns(tmp_path):
+    cmd = [sys.executable, "-m", "experiments.study", f"paths.output_dir={tmp_path}", "study=term", "data=motorcycle",
+           "ensemble=40", "execution=separate", "output.maps=false", "output.tensorboard=false"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.rglob(".partial-*")):  # the job is working
+        assert proc.poll() is None and time.monotonic() < deadline, "the job never started"
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) == 128 + signal.SIGTERM
+    assert not list(tmp_path.rglob(".partial-*")), "staging folder left behind"
+    assert not list(tmp_path.rglob("metrics.json"))
