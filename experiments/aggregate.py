@@ -68,7 +68,8 @@ def _fmt(v: Any, nd: int = 1) -> str:
 
 
 def _config_name(m: dict) -> str:
-    return m["method"] if m["method"] != "som" else m["label"]
+    name = m["method"] if m["method"] != "som" else m["label"]
+    return name + (" (separate runs)" if m.get("execution") == "separate" else "")
 
 
 def result_row(path: Path, m: dict, root: Path | None = None) -> dict[str, Any]:
@@ -132,10 +133,14 @@ def _sort_key(r: dict) -> tuple:
 
 def table1_md(rows: list[dict]) -> str:
     scored = [r for r in rows if "identified_95" in r]
-    out = ["| mode | scene | config | grid | runs | 100 % | ≥ 95 % | useful hits | mean identified | ms per run |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
+    # training order / initialisation become a column where they vary (e.g. the stability study)
+    vary = len({(r["train_order"], r["init"]) for r in scored}) > 1
+    extra = " order, init |" if vary else ""
+    out = ["| mode | scene | config | grid |" + extra + " runs | 100 % | ≥ 95 % | useful hits | mean identified | "
+           "ms per run |", "|---" * (10 + vary) + "|"]
     for r in scored:
-        out.append(f"| {r['mode']} | {r['scene']} | {r['config']} | {r['grid']} | {r['runs']} | "
+        cell = f" {r['train_order']}, {r['init']} |" if vary else ""
+        out.append(f"| {r['mode']} | {r['scene']} | {r['config']} | {r['grid']} |{cell} {r['runs']} | "
                    f"{r['identified_100']} | {r['identified_95']} | {r['useful_hits']} | "
                    f"{_fmt(r['mean_identified_fraction'], 2)} | {_fmt(r['_runtime_ms'], 1)} |")
     out += ["", "The paper (Table 1; synthetic scenes, 100 runs each):", "",

@@ -119,8 +119,10 @@ def write_maps(scene: Scene, result: PipelineResult, out_dir: Path, member: int 
         "disparity": viz.colorize(scene.disparity, scene.valid),
         "segments_grey": viz.grey(grey_map(lab[None], result.ref_disparity[e:e + 1])[0], lo=lo, hi=hi),
         "segments_color": color_map(lab[None], k, seed=0)[0].numpy(),
+        # kept areas (red), kept boxes (yellow), object outline (green), ground plane (blue)
         "areas": viz.draw_areas(back, lab, [a.neurons for a in m.kept], m.reduction.boxes,
-                                scene.main_object_mask if scene.objects is not None else None),
+                                scene.main_object_mask if scene.objects is not None else None,
+                                extra_mask=result.ground.mask if result.ground is not None else None),
         "reduced_disparity": viz.colorize(scene.disparity, scene.valid & m.reduction.mask, lo=lo, hi=hi),
     }
     if result.som is not None:

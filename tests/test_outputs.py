@@ -158,3 +158,16 @@ def test_no_camera_no_point_cloud(tmp_path, blob_scene):
     info = write_point_clouds(blob_scene, r, tmp_path)
     assert info["written"] is False
     assert list(tmp_path.iterdir()) == []
+
+
+def test_areas_picture_tints_the_ground_plane_blue(motorcycle, tmp_path):
+    res = run_pipeline(motorcycle, PipelineConfig(train=TrainConfig(epochs=2)))
+    assert res.ground is not None, "the embedded Motorcycle's floor should be found"
+    write_maps(motorcycle, res, tmp_path)
+    img = cv2.cvtColor(cv2.imread(str(tmp_path / "areas.png")), cv2.COLOR_BGR2RGB).astype(int)
+    ground = res.ground.mask.numpy()
+    for a in res.members[0].kept:
+        ground &= ~a.mask(res.labels[0]).numpy()
+    left = motorcycle.image.permute(1, 2, 0).numpy().astype(int)
+    gain = (img[..., 2] - left[..., 2])[ground].mean() - (img[..., 0] - left[..., 0])[ground].mean()
+    assert gain > 40, f"ground pixels not tinted blue (blue - red gain {gain:.1f})"
