@@ -256,7 +256,6 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
     for stale in out_dir.glob(".partial-*"):  # left by a killed attempt of this same job
         shutil.rmtree(stale, ignore_errors=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
-    writer = None
     try:
         repeats: list[dict[str, float]] = []
         results, per_run_s = [], None
@@ -308,8 +307,8 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
         }
         if cfg.output.maps:
             write_maps(scene, results[0], stage, member=0)
-        if cfg.output.tensorboard:
-            writer = _tensorboard(stage, cfg, metrics)
+        if cfg.output.tensorboard:  # written and closed before anything moves out of the staging folder
+            _tensorboard(stage, cfg, metrics)
         metrics["wall_s"] = time.perf_counter() - t_start
         write_json(stage / "metrics.json", metrics)
         for entry in sorted(stage.iterdir(), key=lambda p: p.name == "metrics.json"):
@@ -318,8 +317,6 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
                 shutil.rmtree(target)
             os.replace(entry, target)
     finally:
-        if writer is not None:
-            writer.close()
         shutil.rmtree(stage, ignore_errors=True)
     s = metrics["summary"]
     name = cfg.label if cfg.method == "som" else f"{cfg.label}/{cfg.method}"
@@ -341,11 +338,20 @@ def _job_info() -> dict[str, Any]:
             "overrides": list(hc.overrides.task)}
 
 
-def _tensorboard(stage: Path, cfg: StudyConfig, metrics: dict[str, Any]):
-    import torch
+def _tensorboard(stage: Path, cfg: StudyConfig, metrics: dict[str, Any]) -> None:
+    """Histograms over the runs and the hparams-plugin record of the job, in ``stage/tb`` (closed on return)."""
     from torch.utils.tensorboard import SummaryWriter
 
     writer = SummaryWriter(str(stage / "tb"))
+    try:
+        _write_tensorboard(writer, cfg, metrics)
+    finally:
+        writer.close()
+
+
+def _write_tensorboard(writer, cfg: StudyConfig, metrics: dict[str, Any]) -> None:
+    import torch
+
     runs = metrics["runs"]
     for key in ("reduction_union", "area_frac", "runtime_s", "identified_fraction"):
         if key in runs and runs[key]:
@@ -361,7 +367,6 @@ def _tensorboard(stage: Path, cfg: StudyConfig, metrics: dict[str, Any]):
                     "hparam/identified_95_rate": s["identified_95"] / s["runs"],
                     "hparam/useful_hit_rate": s["useful_hits"] / s["runs"], "hparam/tradeoff": s["tradeoff"]})
     writer.add_hparams(hp, res, run_name=".")
-    return writer
 
 
 def _exit_cleanly_on_sigterm() -> None:

@@ -60,7 +60,10 @@ class AreaConfig:
             of its pixels, so stray fragments of its segments far from the object do not stretch the
             box (1.0 = the box of all the segments' pixels, the paper's reading).
         size_power: salient: areas are ranked by ``contrast × area_frac ** size_power`` (0 = by
-            contrast alone; 0.5 favours large salient objects over small salient fragments).
+            contrast alone; 0.5 favours large salient objects over small salient fragments). The
+            default 0.25 came from the 100-run study over the shared scenes (OR, useful hits of
+            Motorcycle + KITTI + FlyingThings3D + ETH3D: 247 at 0, 297 at 0.25, 293 at 0.35, 286 at
+            0.5): a small contrasty fragment or SGBM streak no longer beats a whole object.
         max_areas: how many areas are kept at most.
         min_contrast: salient: minimum contrast, as a fraction of the disparity range.
         max_area_frac, min_area_frac: size limits as fractions of the valid pixels.
@@ -71,7 +74,7 @@ class AreaConfig:
     link: str = "image"
     spread: str = "robust"
     min_boundary: float = 0.1
-    size_power: float = 0.0
+    size_power: float = 0.25
     grow: bool = False
     grow_stride: int = 2
     box_coverage: float = 0.99
