@@ -127,9 +127,9 @@ def fit_linear(px: np.ndarray, t: np.ndarray) -> dict[str, float]:
     r2 = 1.0 - float((resid ** 2).sum()) / ss_tot if ss_tot > 0 else float("nan")
     pos = t > 0
     if pos.sum() >= 2:
-        p, c = np.polyfit(np.log(px[pos]), np.log(t[pos]), 1)
+        p = np.polyfit(np.log(px[pos]), np.log(t[pos]), 1)[0]
     else:
-        p, c = float("nan"), float("nan")
+        p = float("nan")
     return {"intercept_ms": float(a) * 1e3, "slope_ms_per_100k_px": float(b) * 1e3 * 1e5, "r2": r2,
             "loglog_exponent": float(p)}
 

@@ -30,8 +30,9 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
+from experiments.study import SCHEMA, config_hash
+
 log = logging.getLogger("somtorch.aggregate")
-SCHEMA = "somtorch.study/1"
 
 PAPER_TABLE1 = [("NOR stair", 91, 91), ("OR stair", 84, 86), ("NOR garden", 79, 91), ("OR garden", 70, 87)]
 PAPER_TABLE2 = [("NOR stair", 12.56, 79.13, 86.35, 90.04), ("OR stair", 16.98, 75.91, 88.11, 90.04),
@@ -104,10 +105,9 @@ def timing_row(path: Path, m: dict, root: Path | None = None) -> dict[str, Any]:
                            "runs": m["summary"]["runs"], "train_px": m["pixels"]["train"], "repeats": len(reps),
                            "job_wall_s": m.get("wall_s")}
     for k in (*STAGES, "wall"):
-        vals = sorted(r[k] for r in reps if k in r)
+        vals = [r[k] for r in reps if k in r]
         if vals:
-            row[f"{k}_s_median"] = vals[len(vals) // 2] if len(vals) % 2 else 0.5 * (
-                vals[len(vals) // 2 - 1] + vals[len(vals) // 2])
+            row[f"{k}_s_median"] = _median(vals)
     row["runtime_per_run_s_mean"] = m["summary"]["runtime_s"]["mean"]
     return row
 
@@ -196,10 +196,7 @@ def runtime_section(jobs: list[tuple[Path, dict]], out: Path) -> str | None:
     groups = {k: v for k, v in groups.items() if len({m["pixels"]["train"] for m in v}) >= 2}
     if not groups:
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     lines = ["Time per stage against training pixels (median of the repeats); exponent b of the least-squares "
              "fit log t = a + b log n over every repeat (b = 1: linear growth).", ""]
@@ -227,9 +224,7 @@ def runtime_section(jobs: list[tuple[Path, dict]], out: Path) -> str | None:
         ax.set_title(name, fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    _save_fig(fig, out / "runtime.png")
-    plt.close(fig)
+    _finish(fig, out / "runtime.png")
     return "\n".join(lines) + "\n"
 
 
@@ -253,10 +248,7 @@ def stability_section(jobs: list[tuple[Path, dict]], out: Path) -> str | None:
     sel = [m for _, m in jobs if m["study"] == "stability"]
     if not sel:
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     def name(m: dict) -> str:
         c = m["config"]
@@ -283,9 +275,7 @@ def stability_section(jobs: list[tuple[Path, dict]], out: Path) -> str | None:
         ax.set_xticks(range(1, len(sel) + 1), [name(m) for m in sel], rotation=30, ha="right", fontsize=7)
         ax.set_title(label)
         ax.grid(True, axis="y", alpha=0.3)
-    fig.tight_layout()
-    _save_fig(fig, out / "stability.png")
-    plt.close(fig)
+    _finish(fig, out / "stability.png")
     return "\n".join(lines) + "\n"
 
 
@@ -293,10 +283,7 @@ def grid_section(jobs: list[tuple[Path, dict]], out: Path) -> str | None:
     sel = [m for _, m in jobs if m["study"] == "grid"]
     if not sel:
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     by_scene: dict[str, list[dict]] = defaultdict(list)
     for m in sel:
@@ -332,9 +319,7 @@ def grid_section(jobs: list[tuple[Path, dict]], out: Path) -> str | None:
     for ax in axes:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    _save_fig(fig, out / "grid.png")
-    plt.close(fig)
+    _finish(fig, out / "grid.png")
     return "\n".join(lines) + "\n"
 
 
@@ -345,10 +330,9 @@ def _mean(v: list | None) -> float | None:
 def executions_section(jobs: list[tuple[Path, dict]]) -> str | None:
     """Jobs whose configs differ only in ``execution``: time of one ensemble vs separate runs."""
     groups: dict[str, dict[str, dict]] = defaultdict(dict)
-    for _, m in jobs:
-        cfg = {k: v for k, v in m.get("config", {}).items() if k not in ("execution", "paths", "output",
-                                                                          "skip_complete", "study", "repeats")}
-        groups[json.dumps(cfg, sort_keys=True, default=str)][m["execution"]] = m
+    for _, m in jobs:  # same rule as the skip logic: the hash of the config, here without `execution`
+        cfg = {k: v for k, v in m.get("config", {}).items() if k != "execution"}
+        groups[config_hash(cfg)][m["execution"]] = m
     pairs = [g for g in groups.values() if "ensemble" in g and "separate" in g]
     if not pairs:
         return None
@@ -364,11 +348,24 @@ def executions_section(jobs: list[tuple[Path, dict]]) -> str | None:
     return "\n".join(lines) + "\n"
 
 
-def _save_fig(fig, path: Path) -> None:
+def _pyplot():
+    """matplotlib.pyplot on the file-only Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _finish(fig, path: Path) -> None:
+    """Lay out, write atomically as PNG and close a figure."""
     from somtorch.atomic import atomic_path
 
+    fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
+    _pyplot().close(fig)
 
 
 def aggregate(folders: list[Path], out: Path) -> dict[str, Path]:
@@ -379,9 +376,9 @@ def aggregate(folders: list[Path], out: Path) -> dict[str, Path]:
     if not jobs:
         raise FileNotFoundError(f"no study metrics.json (schema {SCHEMA}) below {[str(f) for f in folders]}")
     root = folders[0] if folders[0].is_dir() else None
-    rows = sorted((result_row(p, m, root) for p, m in jobs), key=_sort_key)
-    order = {r["job"]: i for i, r in enumerate(rows)}
-    jobs = sorted(jobs, key=lambda pm: order[result_row(pm[0], pm[1], root)["job"]])
+    ranked = sorted(((result_row(p, m, root), p, m) for p, m in jobs), key=lambda t: _sort_key(t[0]))
+    rows = [r for r, _, _ in ranked]
+    jobs = [(p, m) for _, p, m in ranked]
     timings = [timing_row(p, m, root) for p, m in jobs]
     out.mkdir(parents=True, exist_ok=True)
     written: dict[str, Path] = {}

@@ -174,18 +174,10 @@ def _merge_runs(parts: list[dict[str, list]]) -> dict[str, list]:
     return out
 
 
-def _stats(values: list[float]) -> dict[str, Any]:
-    import numpy as np
-
-    if not values:
-        return {"n": 0, "min": None, "mean": None, "max": None, "median": None}
-    a = np.asarray(values, dtype=np.float64)
-    return {"n": int(a.size), "min": float(a.min()), "mean": float(a.mean()), "max": float(a.max()),
-            "median": float(np.median(a))}
-
-
 def summarize_runs(runs: dict[str, list], x_opt: float | None) -> dict[str, Any]:
     """The Table 1 / Table 2 numbers of one job from its per-run values."""
+    from somtorch.outputs import summary_stats as _stats
+
     n = len(runs["seed"])
     out: dict[str, Any] = {"runs": n, "reduction_all": _stats(runs["reduction_union"]),
                            "runtime_s": _stats(runs["runtime_s"]), "area_frac": _stats(runs["area_frac"])}
@@ -233,7 +225,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
 
     from somtorch import __version__
     from somtorch.atomic import write_json
-    from somtorch.disparity.scene import resize_scene
+    from somtorch.disparity.resize import resize_scene
     from somtorch.outputs import write_maps
     from somtorch.pipeline import run_pipeline
 

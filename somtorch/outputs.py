@@ -15,10 +15,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from . import viz
-from .atomic import atomic_path, write_json
+from .atomic import atomic_path
 from .disparity.scene import Scene
 from .pipeline import PipelineResult
 from .tasks.segmentation import color_map, grey_map
@@ -91,9 +90,9 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "identified_95": sum(s.identified_95 for s in scores),
             "useful_hits": sum(s.useful_hit for s in scores),
             "x_opt": scores[0].x_opt,
-            "reduction_complete": _stats(complete),
-            "reduction_95": _stats(hits95),
-            "reduction_crops_complete": _stats([s.reduction_crops for s in scores if s.identified_100]),
+            "reduction_complete": summary_stats(complete),
+            "reduction_95": summary_stats(hits95),
+            "reduction_crops_complete": summary_stats([s.reduction_crops for s in scores if s.identified_100]),
             "mean_identified_fraction": float(np.mean([s.identified_fraction for s in scores])),
         }
     if config is not None:
@@ -101,10 +100,13 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
     return out
 
 
-def _stats(values: list[float]) -> dict[str, float | int | None]:
+def summary_stats(values: list[float]) -> dict[str, float | int | None]:
+    """``n``, ``min``, ``mean``, ``max`` and ``median`` of a list (None for an empty one)."""
     if not values:
-        return {"n": 0, "min": None, "mean": None, "max": None}
-    return {"n": len(values), "min": float(min(values)), "mean": float(np.mean(values)), "max": float(max(values))}
+        return {"n": 0, "min": None, "mean": None, "max": None, "median": None}
+    a = np.asarray(values, dtype=np.float64)
+    return {"n": int(a.size), "min": float(a.min()), "mean": float(a.mean()), "max": float(a.max()),
+            "median": float(np.median(a))}
 
 
 def write_maps(scene: Scene, result: PipelineResult, out_dir: Path, member: int = 0) -> dict[str, np.ndarray]:
