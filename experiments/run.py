@@ -137,7 +137,8 @@ def _log_hparams(writer, cfg: RunConfig, metrics: dict) -> None:
           "lr": cfg.train.lr, "sigma": cfg.train.sigma if cfg.train.sigma is not None else -1.0,
           "d_weight": cfg.features.d_weight, "train_stride": cfg.features.train_stride,
           "select": cfg.objects.select, "similarity": cfg.objects.similarity,
-          "tolerance_frac": cfg.reduction.tolerance_frac, "ensemble": cfg.ensemble, "seed": cfg.seed}
+          "tolerance_frac": cfg.reduction.tolerance_frac,
+          "tolerance_image": cfg.reduction.tolerance_image, "ensemble": cfg.ensemble, "seed": cfg.seed}
     m0 = metrics["members"][cfg.output.member]
     res = {"hparam/reduction_union": m0["reduction_union"],
            "hparam/quantization_error": m0["quantization_error"] or float("nan")}

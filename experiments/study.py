@@ -351,7 +351,8 @@ def _write_tensorboard(writer, cfg: StudyConfig, metrics: dict[str, Any]) -> Non
     hp = {"scene": metrics["scene"]["name"], "method": cfg.method, "label": cfg.label, "mode": metrics["mode"],
           "grid": metrics["grid"], "train_mode": cfg.train.mode, "order": cfg.train.order, "init": cfg.som.init,
           "lr": cfg.train.lr, "sigma": cfg.train.sigma if cfg.train.sigma is not None else -1.0,
-          "tolerance_frac": cfg.reduction.tolerance_frac, "runs": cfg.runs, "execution": cfg.execution}
+          "tolerance_frac": cfg.reduction.tolerance_frac,
+          "tolerance_image": cfg.reduction.tolerance_image, "runs": cfg.runs, "execution": cfg.execution}
     s = metrics["summary"]
     res = {"hparam/reduction_mean": s["reduction_all"]["mean"], "hparam/runtime_s": s["runtime_s"]["mean"]}
     if "identified_95" in s:

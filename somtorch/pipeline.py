@@ -32,8 +32,8 @@ from .disparity.features import Features, make_features
 from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
 from .tasks.ground import GroundConfig, GroundPlane, fit_ground_plane
-from .tasks.objects import (AreaConfig, NeuronStats, ObjectArea, find_object_areas, grow_area, neuron_stats,
-                            select_areas, tighten_box)
+from .tasks.objects import (AreaConfig, NeuronStats, ObjectArea, find_object_areas, grow_area, merge_adjacent,
+                            neuron_stats, refine_box, select_areas)
 from .tasks.reduction import Reduction, reduce_map
 from .tasks.scoring import Score, score_reduction
 from .tasks.segmentation import segment
@@ -113,12 +113,23 @@ class TrainConfig:
 
 @dataclass
 class ReductionConfig:
+    """Tolerance margin around each kept box (paper Fig. 16); see :func:`~somtorch.tasks.reduction.reduce_map`.
+
+    The default (robust preset) is 2 % of the image diagonal on every side; ``conf/reduction/paper.yaml``
+    holds the paper-faithful 5 % of the box side. Measured (100 runs, OR, robust areas): with 5 % of
+    the box side a perfectly found Motorcycle (box = 69 % of the image) is never a useful hit
+    (reduction 15 % < 0.75 · x_opt = 23.6 %); with 2 % of the diagonal useful hits rise from
+    54 → 87 there and 59 → 85 on FlyingThings3D, KITTI (91) and ETH3D (93) unchanged.
+    """
+
     tolerance_px: float = 0.0
-    tolerance_frac: float = 0.05
+    tolerance_frac: float = 0.0
+    tolerance_image: float = 0.02
 
     def __post_init__(self) -> None:
         check_positive("reduction.tolerance_px", self.tolerance_px, allow_zero=True)
         check_positive("reduction.tolerance_frac", self.tolerance_frac, allow_zero=True)
+        check_positive("reduction.tolerance_image", self.tolerance_image, allow_zero=True)
 
 
 @dataclass
@@ -306,19 +317,30 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     if scene.objects is not None:
         obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
     members, t_obj, t_red = [], t_stats0, 0.0
+    oc = cfg.objects
+    residual = None
+    if ground is not None and oc.ground_clutter > 0 and not oc.grow:
+        t0 = _tic()
+        h, w = scene.disparity.shape
+        residual = (scene.disparity - ground.disparity(h, w)).abs()
+        t_obj += _tic() - t0
     for e in range(runs):
         t0 = _tic()
         stats = stats0 if stats0 is not None else neuron_stats(labels[e], scene.disparity, num_k)
-        areas = find_object_areas(ref_d[e], grid_d2, stats, cfg.objects)
-        kept = select_areas(areas, stats, cfg.objects)
-        if cfg.objects.grow:
-            kept = [grow_area(a, labels[e], scene.disparity, usable, stride=cfg.objects.grow_stride) for a in kept]
-        elif cfg.objects.box_coverage < 1.0:
-            kept = [tighten_box(a, labels[e], coverage=cfg.objects.box_coverage, stride=cfg.objects.grow_stride)
+        areas = find_object_areas(ref_d[e], grid_d2, stats, oc)
+        kept = select_areas(areas, stats, oc)
+        kept = merge_adjacent(kept, stats, ratio=oc.merge, min_boundary=oc.min_boundary,
+                              max_area_frac=oc.max_area_frac)
+        if oc.grow:
+            kept = [grow_area(a, labels[e], scene.disparity, usable, stride=oc.grow_stride) for a in kept]
+        else:
+            kept = [refine_box(a, labels[e], coverage=oc.box_coverage, quantile=oc.box_quantile,
+                               stride=oc.grow_stride, ground_residual=residual,
+                               clutter_band=oc.ground_clutter * ground.tol if ground is not None else 0.0)
                     for a in kept]
         t1 = _tic()
         red = reduce_map([a.box for a in kept], scene.valid, tolerance_px=cfg.reduction.tolerance_px,
-                         tolerance_frac=cfg.reduction.tolerance_frac)
+                         tolerance_frac=cfg.reduction.tolerance_frac, tolerance_image=cfg.reduction.tolerance_image)
         t_red += _tic() - t1
         t_obj += t1 - t0
         score = score_reduction(red, obj_mask, scene.valid) if obj_mask is not None else None

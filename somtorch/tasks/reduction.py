@@ -53,29 +53,38 @@ class Reduction:
 
 
 def expand_box(box: Box, shape: tuple[int, int], *, tolerance_px: float = 0.0,
-               tolerance_frac: float = 0.0) -> Box:
-    """Enlarge a box by ``tolerance_px + tolerance_frac · side`` on every side, clipped to the image."""
+               tolerance_frac: float = 0.0, tolerance_image: float = 0.0) -> Box:
+    """Enlarge a box by ``tolerance_px + tolerance_frac · side + tolerance_image · image diagonal`` on
+    every side, clipped to the image."""
     x0, y0, x1, y1 = box
     h, w = shape
-    mx = tolerance_px + tolerance_frac * (x1 - x0 + 1)
-    my = tolerance_px + tolerance_frac * (y1 - y0 + 1)
+    fixed = tolerance_px + tolerance_image * math.hypot(h, w)
+    mx = fixed + tolerance_frac * (x1 - x0 + 1)
+    my = fixed + tolerance_frac * (y1 - y0 + 1)
     return (max(0, math.floor(x0 - mx)), max(0, math.floor(y0 - my)), min(w - 1, math.ceil(x1 + mx)),
             min(h - 1, math.ceil(y1 + my)))
 
 
 def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = 0.0,
-               tolerance_frac: float = 0.05) -> Reduction:
+               tolerance_frac: float = 0.05, tolerance_image: float = 0.0) -> Reduction:
     """Keep the pixels inside the (enlarged) boxes.
+
+    The three margins add up. ``tolerance_frac`` (the paper's reading: a frame around the area that
+    grows with it) costs most on large objects: a 5 % margin on every side of a box covering 70 % of
+    the image keeps 85 %. ``tolerance_image`` is the same for every box of an image and independent of
+    its resolution.
 
     Args:
         boxes: object-area boxes (x0, y0, x1, y1), inclusive.
         valid: validity mask of the disparity map ``(H, W)``.
         tolerance_px: margin in pixels added on every side.
         tolerance_frac: margin as a fraction of the box's width / height added on every side.
+        tolerance_image: margin as a fraction of the image diagonal added on every side.
     """
     check_tensor("valid", valid, ndim=2, dtype=torch.bool)
     check_positive("tolerance_px", tolerance_px, allow_zero=True)
     check_positive("tolerance_frac", tolerance_frac, allow_zero=True)
+    check_positive("tolerance_image", tolerance_image, allow_zero=True)
     shape = (int(valid.shape[0]), int(valid.shape[1]))
     # an integral image of the valid mask gives each box's valid count in O(1)
     ii = torch.zeros(shape[0] + 1, shape[1] + 1, dtype=torch.long, device=valid.device)
@@ -87,7 +96,8 @@ def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = 0
                 or b[1] >= shape[0]:
             raise ValueError(f"boxes[{i}]={tuple(b)} is not a box (x0, y0, x1, y1) with x0 <= x1, y0 <= y1 "
                              f"that overlaps the {shape[1]}x{shape[0]} image")
-        x0, y0, x1, y1 = expand_box(b, shape, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac)
+        x0, y0, x1, y1 = expand_box(b, shape, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac,
+                                    tolerance_image=tolerance_image)
         kept_boxes.append((x0, y0, x1, y1))
         crops.append(int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0]))
         mask[y0:y1 + 1, x0:x1 + 1] = True

@@ -217,7 +217,7 @@ def test_optuna_sweeper_searches_and_reports_the_best_trade_off(tmp_path, shared
            "hydra.sweeper.n_trials=3", f"paths.data_dir={shared_data}")
     result = OmegaConf.load(tmp_path / "studies" / "optuna" / "optimization_results.yaml")
     assert 0.0 <= float(result.best_value) <= 1.0
-    assert {"train.lr", "train.sigma", "som.rows", "reduction.tolerance_frac"} <= set(result.best_params)
+    assert {"train.lr", "train.sigma", "som.rows", "reduction.tolerance_image"} <= set(result.best_params)
     values = [m["summary"]["tradeoff"] for _, m in find_metrics([tmp_path / "studies" / "optuna"])]
     assert len(values) == 3 and max(values) == pytest.approx(float(result.best_value))
 

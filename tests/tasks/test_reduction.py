@@ -108,3 +108,14 @@ def test_reduce_map_rejects_bad_arguments():
 def test_reduce_map_rejects_boxes_that_are_inverted_or_outside_the_image(box):
     with pytest.raises(ValueError, match="box"):
         reduce_map([box], _all_valid(), tolerance_frac=0.0)
+
+
+def test_image_tolerance_is_a_fraction_of_the_image_diagonal_for_every_box():
+    valid = torch.ones(30, 40, dtype=torch.bool)  # diagonal 50 px: 2 % = 1 px
+    small, large = (10, 10, 11, 11), (5, 5, 34, 24)
+    r = reduce_map([small, large], valid, tolerance_frac=0.0, tolerance_image=0.02)
+    assert r.boxes == [(9, 9, 12, 12), (4, 4, 35, 25)]  # the same 1 px margin whatever the box size
+    # it adds to the other two margins
+    assert reduce_map([small], valid, tolerance_px=1, tolerance_frac=0.5, tolerance_image=0.02).boxes == [(7, 7, 14, 14)]
+    with pytest.raises(ValueError, match="tolerance_image"):
+        reduce_map([small], valid, tolerance_image=-0.1)

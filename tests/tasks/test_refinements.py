@@ -1,27 +1,100 @@
-"""Optional refinements of the object areas and the input: box tightening, area growing, speckles."""
+"""Refinements of the object areas and the input: box refinement, segment merging, area growing, speckles."""
 
 from __future__ import annotations
 
 import torch
 
 from somtorch.disparity.filters import remove_speckles
-from somtorch.tasks.objects import ObjectArea, grow_area, tighten_box
+from somtorch.tasks.objects import ObjectArea, grow_area, merge_adjacent, neuron_stats, refine_box
 
 
 def _area(neurons, box, mean_d=50.0, contrast=40.0):
     return ObjectArea(neurons=neurons, pixels=1, box=box, mean_disparity=mean_d, contrast=contrast, area_frac=0.1)
 
 
-def test_tighten_box_drops_a_stray_fragment_but_keeps_the_body():
+def test_refine_box_drops_a_stray_fragment_but_keeps_the_body():
     labels = torch.full((100, 100), 1, dtype=torch.long)
     labels[20:60, 30:70] = 0  # the object's segment: a 40x40 block ...
     labels[95:97, 2:4] = 0  # ... plus a 2x2 stray fragment far away (0.25 % of its pixels)
     area = _area([0], (2, 20, 69, 96))
-    tight = tighten_box(area, labels, coverage=0.99, stride=1)
+    tight = refine_box(area, labels, coverage=0.99, stride=1)
     assert tight.box == (30, 20, 69, 59)
     assert tight.extra["segment_box"] == (2, 20, 69, 96)
     # coverage 1.0 keeps every piece: the paper's box of all segment pixels
-    assert tighten_box(area, labels, coverage=1.0, stride=1).box == area.box
+    assert refine_box(area, labels, coverage=1.0, stride=1) is area
+
+
+def test_refine_box_quantile_ignores_a_thin_protrusion():
+    labels = torch.full((200, 200), 1, dtype=torch.long)
+    labels[100:180, 40:160] = 0  # 9,600 px body
+    labels[95:100, 100] = 0  # a 1-px wide, 5 px long antenna on top (0.05 % of the pixels), connected
+    area = _area([0], (40, 95, 159, 179))
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1) is area
+    trimmed = refine_box(area, labels, coverage=1.0, quantile=0.001, stride=1)  # 0.1 % = 9.6 px per side
+    assert trimmed.box == (40, 100, 159, 179)  # the antenna is cut, a body edge (80 or 120 px) is not
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0001, stride=1).box == area.box  # 1 px: kept
+
+
+def test_refine_box_leaves_out_pieces_flat_on_the_ground_plane():
+    labels = torch.full((120, 160), 1, dtype=torch.long)
+    residual = torch.full((120, 160), 5.0)  # |disparity - ground plane| in px
+    labels[30:70, 40:80] = 0  # the object: well off the plane
+    labels[100:110, 100:150] = 0  # a floor streak with the object's disparity, on the plane
+    residual[100:110, 100:150] = 0.3
+    area = _area([0], (40, 30, 149, 109))
+    kept = refine_box(area, labels, coverage=1.0, stride=1, ground_residual=residual, clutter_band=1.0)
+    assert kept.box == (40, 30, 79, 69)
+    assert kept.extra["ground_clutter_pieces"] == 1
+    # a band narrower than the streak's residual keeps it; no plane keeps it
+    assert refine_box(area, labels, coverage=1.0, stride=1, ground_residual=residual, clutter_band=0.2) \
+        .box == area.box
+    assert refine_box(area, labels, coverage=1.0, stride=1, ground_residual=None, clutter_band=1.0) is area
+    # an area lying wholly on the plane is left as it is (nothing would remain)
+    flat = torch.full((120, 160), 0.1)
+    assert refine_box(area, labels, coverage=1.0, stride=1, ground_residual=flat, clutter_band=1.0).box == area.box
+
+
+def _stats_of(labels, disp):
+    return neuron_stats(labels, disp, int(labels.max()) + 1)
+
+
+def test_merge_adjacent_joins_a_touching_segment_of_similar_depth_only():
+    # background 10 px; the object: segment 0 (50 px) and its front part, segment 1 (56 px);
+    # segment 2 touches segment 0 but lies at the background's depth; segment 3 (54 px) is near but
+    # does not touch the object
+    disp = torch.full((60, 90), 10.0)
+    labels = torch.full((60, 90), 4, dtype=torch.long)
+    labels[10:30, 10:30], disp[10:30, 10:30] = 0, 50.0
+    labels[30:45, 10:30], disp[30:45, 10:30] = 1, 56.0
+    labels[10:30, 30:40], disp[10:30, 30:40] = 2, 12.0
+    labels[10:30, 60:80], disp[10:30, 60:80] = 3, 54.0
+    stats = _stats_of(labels, disp)
+    kept = [_area([0], (10, 10, 29, 29), mean_d=50.0, contrast=40.0)]
+    merged = merge_adjacent(kept, stats, ratio=0.75)
+    assert len(merged) == 1
+    assert merged[0].neurons == [0, 1]
+    assert merged[0].box == (10, 10, 29, 44)
+    assert merged[0].pixels == 400 + 300
+    assert abs(merged[0].mean_disparity - (50 * 400 + 56 * 300) / 700) < 1e-9
+    assert merged[0].extra["merged_segments"] == 1
+    # ratio 0 is off; a ratio too small for the 6 px step joins nothing
+    assert merge_adjacent(kept, stats, ratio=0.0) is kept
+    assert merge_adjacent(kept, stats, ratio=0.1)[0] is kept[0]
+    # the size limit stops the growth before the group exceeds it
+    assert merge_adjacent(kept, stats, ratio=0.75, max_area_frac=0.1)[0].neurons == [0]
+
+
+def test_merge_adjacent_drops_a_kept_area_absorbed_by_a_better_one():
+    disp = torch.full((40, 60), 10.0)
+    labels = torch.full((40, 60), 2, dtype=torch.long)
+    labels[5:20, 5:25], disp[5:20, 5:25] = 0, 50.0
+    labels[20:35, 5:25], disp[20:35, 5:25] = 1, 52.0
+    stats = _stats_of(labels, disp)
+    first = _area([0], (5, 5, 24, 19), mean_d=50.0, contrast=40.0)
+    second = _area([1], (5, 20, 24, 34), mean_d=52.0, contrast=42.0)
+    merged = merge_adjacent([first, second], stats, ratio=0.75)
+    assert [a.neurons for a in merged] == [[0, 1]]
+    assert merged[0].rank == 0
 
 
 def test_grow_area_recovers_the_whole_near_object_and_stops_at_the_background():
