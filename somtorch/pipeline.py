@@ -32,8 +32,8 @@ from .disparity.features import Features, make_features
 from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
 from .tasks.ground import GroundConfig, GroundPlane, fit_ground_plane
-from .tasks.objects import (AreaConfig, NeuronStats, ObjectArea, find_object_areas, grow_area, merge_adjacent,
-                            neuron_stats, refine_box, select_areas)
+from .tasks.objects import (AreaConfig, NeuronStats, ObjectArea, disparity_spread, find_object_areas, grow_area,
+                            merge_adjacent, neuron_stats, refine_box, select_areas)
 from .tasks.reduction import Reduction, reduce_map
 from .tasks.scoring import Score, score_reduction
 from .tasks.segmentation import segment
@@ -326,9 +326,13 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         h, w = scene.disparity.shape
         residual = (scene.disparity - ground.disparity(h, w)).abs()
         t_obj += _tic() - t0
+    if stats0 is None:  # every member segments the same pixels: their disparity spread is computed once
+        t0 = _tic()
+        spread = disparity_spread(scene.disparity, labels[0] >= 0)
+        t_obj += _tic() - t0
     for e in range(runs):
         t0 = _tic()
-        stats = stats0 if stats0 is not None else neuron_stats(labels[e], scene.disparity, num_k)
+        stats = stats0 if stats0 is not None else neuron_stats(labels[e], scene.disparity, num_k, spread=spread)
         areas = find_object_areas(ref_d[e], grid_d2, stats, oc)
         kept = select_areas(areas, stats, oc)
         kept = merge_adjacent(kept, stats, ratio=oc.merge, min_boundary=oc.min_boundary,

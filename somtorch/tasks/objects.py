@@ -178,8 +178,29 @@ class ObjectArea:
         return torch.isin(labels, torch.tensor(self.neurons, dtype=labels.dtype, device=labels.device))
 
 
-def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int) -> NeuronStats:
+def disparity_spread(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(min, max) and (5th, 95th percentile) of the disparity of the ``valid`` pixels (the latter on a
+    ~20,000-pixel regular subsample): the ``d_range`` / ``d_robust`` of :class:`NeuronStats`.
+
+    They depend on the segmented pixels only, not on the segments, so the members of an ensemble
+    (which all segment the same pixels) can share one computation (``neuron_stats(spread=…)``).
+    """
+    d = disparity[valid]
+    step = max(1, d.numel() // 20_000)
+    sample = d[::step].double()
+    n = sample.numel()
+    lo_q = float(sample.kthvalue(max(1, int(0.05 * n))).values)
+    hi_q = float(sample.kthvalue(max(1, int(0.95 * n))).values)
+    return (float(d.min()), float(d.max())), (lo_q, hi_q)
+
+
+def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int, *,
+                 spread: tuple[tuple[float, float], tuple[float, float]] | None = None) -> NeuronStats:
     """Statistics of the segments of one label map.
+
+    Args:
+        spread: :func:`disparity_spread` of ``disparity`` over ``labels >= 0`` if already known
+            (computed here otherwise).
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 invalid), ``disparity`` ``(H, W)``.
@@ -212,13 +233,8 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     boundary = torch.bincount(torch.cat(pairs), minlength=(k + 1) ** 2).view(k + 1, k + 1)[:k, :k].double()
     boundary.fill_diagonal_(0.0)
     boundary = boundary + boundary.T
-    d = disparity[valid]
-    step = max(1, d.numel() // 20_000)
-    sample = d[::step].double()
-    n = sample.numel()
-    lo_q = float(sample.kthvalue(max(1, int(0.05 * n))).values)
-    hi_q = float(sample.kthvalue(max(1, int(0.95 * n))).values)
-    return NeuronStats(count, mean_d, box, boundary, (float(d.min()), float(d.max())), (lo_q, hi_q))
+    d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
+    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust)
 
 
 def _components(adj: torch.Tensor) -> list[list[int]]:
@@ -269,25 +285,34 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
         near = touch if link == "image" else near | touch
     adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
     adj.fill_diagonal_(False)
+    comps = _components(adj)
+    # per-component sums as (C, K) one-hot products: one pass instead of a loop of small tensor ops
+    owner = torch.empty(len(ref), dtype=torch.long)
+    for i, comp in enumerate(comps):
+        owner[comp] = i
+    onehot = torch.zeros(len(comps), len(ref), dtype=torch.float64)
+    onehot[owner, torch.arange(len(ref))] = 1.0
+    cnt = stats.count.double()
+    md = torch.nan_to_num(stats.mean_d.double())
+    n_px = onehot @ cnt
+    mean = (onehot @ (md * cnt)) / n_px.clamp_min(1.0)
+    border = (onehot @ stats.boundary) * (1.0 - onehot)  # (C, K) boundary with the segments outside
+    b_len = border.sum(1)
+    contrast = torch.where(b_len > 0, mean - (border @ md) / b_len.clamp_min(1e-300), torch.zeros_like(mean))
+    nonempty = stats.count > 0
+    big = torch.iinfo(torch.long).max
+    x0 = torch.full((len(comps),), big).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 0], "amin")
+    y0 = torch.full((len(comps),), big).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 1], "amin")
+    x1 = torch.full((len(comps),), -1).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 2], "amax")
+    y1 = torch.full((len(comps),), -1).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 3], "amax")
     total = float(stats.count.sum())
     areas = []
-    for comp in _components(adj):
-        idx = torch.tensor(comp)
-        n = float(stats.count[idx].sum())
+    for i, comp in enumerate(comps):
+        n = float(n_px[i])
         if n == 0:
             continue
-        cnt = stats.count[idx]
-        mean_d = float((torch.nan_to_num(stats.mean_d[idx]) * cnt).sum() / n)
-        inside = torch.zeros(len(ref), dtype=torch.bool)
-        inside[idx] = True
-        border = stats.boundary[idx][:, ~inside].sum(0)  # (K_outside,) boundary with outside segments
-        outside_d = torch.nan_to_num(stats.mean_d[~inside])
-        contrast = (mean_d - float((border * outside_d).sum() / border.sum())) if border.sum() > 0 else 0.0
-        b = stats.box[idx]
-        nonempty = cnt > 0
-        box = (int(b[nonempty, 0].min()), int(b[nonempty, 1].min()), int(b[nonempty, 2].max()),
-               int(b[nonempty, 3].max()))
-        areas.append(ObjectArea(comp, int(n), box, mean_d, contrast, n / total))
+        areas.append(ObjectArea(comp, int(n), (int(x0[i]), int(y0[i]), int(x1[i]), int(y1[i])), float(mean[i]),
+                                float(contrast[i]), n / total))
     return areas
 
 

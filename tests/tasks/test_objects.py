@@ -12,7 +12,8 @@ import pytest
 import torch
 
 from somtorch.core.grid import grid_sqdist
-from somtorch.tasks.objects import AreaConfig, ObjectArea, find_object_areas, neuron_stats, select_areas
+from somtorch.tasks.objects import (AreaConfig, ObjectArea, disparity_spread, find_object_areas, neuron_stats,
+                                    select_areas)
 
 ROWS, COLS, B = 4, 7, 5
 # conf/objects/paper.yaml: keep the nearest area, no size or contrast limits
@@ -217,6 +218,10 @@ def test_neuron_stats_match_brute_force():
     torch.testing.assert_close(s.boundary, boundary)
     valid = labels >= 0
     assert s.d_range == (pytest.approx(float(disp[valid].min())), pytest.approx(float(disp[valid].max())))
+    # a spread computed once (as the pipeline does for all members) gives the same statistics
+    shared = neuron_stats(labels, disp, k, spread=disparity_spread(disp, valid))
+    assert (shared.d_range, shared.d_robust) == (s.d_range, s.d_robust)
+    assert torch.equal(shared.boundary, s.boundary) and torch.equal(shared.box, s.box)
 
 
 def test_neuron_stats_rejects_bad_inputs():
