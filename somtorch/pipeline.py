@@ -32,8 +32,8 @@ from .disparity.features import Features, make_features
 from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
 from .tasks.ground import GroundConfig, GroundPlane, fit_ground_plane
-from .tasks.objects import (AreaConfig, NeuronStats, ObjectArea, disparity_spread, find_object_areas, grow_area,
-                            merge_adjacent, neuron_stats, refine_box, select_areas)
+from .tasks.objects import (AreaConfig, NeuronStats, ObjectArea, disparity_spread, find_object_areas, kept_areas,
+                            neuron_stats)
 from .tasks.reduction import Reduction, reduce_map
 from .tasks.scoring import Score, score_reduction
 from .tasks.segmentation import segment
@@ -321,11 +321,13 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     members, t_obj, t_red = [], t_stats0, 0.0
     oc = cfg.objects
     residual = None
+    t0 = _tic()
+    h, w = scene.disparity.shape
     if ground is not None and oc.ground_clutter > 0 and not oc.grow:
-        t0 = _tic()
-        h, w = scene.disparity.shape
         residual = (scene.disparity - ground.disparity(h, w)).abs()
-        t_obj += _tic() - t0
+    valid_ii = torch.zeros(h + 1, w + 1, dtype=torch.long)
+    valid_ii[1:, 1:] = scene.valid.long().cumsum(0).cumsum(1)
+    t_obj += _tic() - t0
     if stats0 is None:  # every member segments the same pixels: their disparity spread is computed once
         t0 = _tic()
         spread = disparity_spread(scene.disparity, labels[0] >= 0)
@@ -334,16 +336,9 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         t0 = _tic()
         stats = stats0 if stats0 is not None else neuron_stats(labels[e], scene.disparity, num_k, spread=spread)
         areas = find_object_areas(ref_d[e], grid_d2, stats, oc)
-        kept = select_areas(areas, stats, oc)
-        kept = merge_adjacent(kept, stats, ratio=oc.merge, min_boundary=oc.min_boundary,
-                              max_area_frac=oc.max_area_frac)
-        if oc.grow:
-            kept = [grow_area(a, labels[e], scene.disparity, usable, stride=oc.grow_stride) for a in kept]
-        else:
-            kept = [refine_box(a, labels[e], coverage=oc.box_coverage, quantile=oc.box_quantile,
-                               stride=oc.grow_stride, ground_residual=residual,
-                               clutter_band=oc.ground_clutter * ground.tol if ground is not None else 0.0)
-                    for a in kept]
+        kept = kept_areas(areas, stats, labels[e], oc, valid_integral=valid_ii, ground_residual=residual,
+                          clutter_band=oc.ground_clutter * ground.tol if ground is not None else 0.0,
+                          disparity=scene.disparity, usable=usable)
         t1 = _tic()
         red = reduce_map([a.box for a in kept], scene.valid, tolerance_px=cfg.reduction.tolerance_px,
                          tolerance_frac=cfg.reduction.tolerance_frac, tolerance_image=cfg.reduction.tolerance_image)

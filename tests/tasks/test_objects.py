@@ -240,7 +240,7 @@ def test_neuron_stats_rejects_bad_inputs():
     {"min_contrast": -0.01}, {"max_area_frac": 0.0}, {"max_area_frac": 1.5},
     {"min_area_frac": -0.1}, {"min_area_frac": 0.5, "max_area_frac": 0.5},
     {"box_quantile": 0.5}, {"box_quantile": -0.01}, {"ground_clutter": -1.0}, {"merge": -0.5},
-    {"merge": float("nan")},
+    {"merge": float("nan")}, {"min_purity": 1.5}, {"min_purity": -0.1}, {"purity_candidates": 0},
 ])
 def test_area_config_rejects_bad_values(kwargs):
     with pytest.raises(ValueError, match="|".join(kwargs)):

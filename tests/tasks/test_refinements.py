@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 
 from somtorch.disparity.filters import remove_speckles
-from somtorch.tasks.objects import ObjectArea, grow_area, merge_adjacent, neuron_stats, refine_box
+from somtorch.tasks.objects import (AreaConfig, ObjectArea, box_purity, find_object_areas, grow_area, kept_areas,
+                                    merge_adjacent, neuron_stats, refine_box, select_areas)
 
 
 def _area(neurons, box, mean_d=50.0, contrast=40.0):
@@ -130,3 +132,56 @@ def test_remove_speckles_drops_small_islands_only():
     assert int((~out).sum()) == 9
     assert torch.equal(remove_speckles(disp, valid, max_size_frac=0.0), valid)  # 0 = off
     assert not remove_speckles(disp, ~valid).any()  # nothing valid stays nothing
+
+
+def _valid_integral(valid):
+    ii = torch.zeros(valid.shape[0] + 1, valid.shape[1] + 1, dtype=torch.long)
+    ii[1:, 1:] = valid.long().cumsum(0).cumsum(1)
+    return ii
+
+
+def test_box_purity_is_the_share_of_the_boxs_valid_pixels_that_are_the_areas_own():
+    labels = torch.zeros(40, 40, dtype=torch.long)
+    labels[10:20, 10:30] = 1  # 200 px of the area ...
+    valid = torch.ones(40, 40, dtype=torch.bool)
+    valid[10:20, 20:30] = False  # ... of which 100 have no disparity (and count in neither)
+    labels[~valid] = -1
+    ii = _valid_integral(valid)
+    assert box_purity(_area([1], (10, 10, 29, 19)), labels, ii) == 1.0
+    assert box_purity(_area([1], (10, 10, 29, 29)), labels, ii) == 100 / (100 + 10 * 20)
+
+
+def _speckles_and_object():
+    # background (segment 0) at 10 px; a compact object (segment 1) at 40 px; an area of isolated
+    # speckles (segment 2, every 6th pixel of a 60 x 30 region) at 90 px: more contrast than the object
+    h, w = 60, 80
+    disp = torch.full((h, w), 10.0)
+    labels = torch.zeros(h, w, dtype=torch.long)
+    labels[20:40, 10:30], disp[20:40, 10:30] = 1, 40.0
+    labels[0:60:6, 50:80:6], disp[0:60:6, 50:80:6] = 2, 90.0
+    stats = neuron_stats(labels, disp, 3)
+    areas = find_object_areas(torch.tensor([10.0, 40.0, 90.0]), None, stats, AreaConfig())
+    return labels, disp, stats, areas
+
+
+def test_kept_areas_skips_a_speckle_area_whose_box_is_mostly_other_pixels():
+    labels, disp, stats, areas = _speckles_and_object()
+    ii = _valid_integral(torch.ones_like(labels, dtype=torch.bool))
+    ranked = select_areas(areas, stats, AreaConfig(max_areas=3))
+    assert ranked[0].neurons == [2]  # the speckles rank first by contrast x size
+    kept = kept_areas(areas, stats, labels, AreaConfig(), valid_integral=ii)
+    assert [a.neurons for a in kept] == [[1]]
+    assert kept[0].box == (10, 20, 29, 39) and kept[0].extra["purity"] == 1.0
+    # without the test (min_purity 0, the paper's behaviour) the speckles are kept
+    off = kept_areas(areas, stats, labels, AreaConfig(min_purity=0.0), valid_integral=ii)
+    assert [a.neurons for a in off] == [[2]] and off[0].extra["purity"] < 0.05
+    # a single candidate allowed: nothing passes, so the best-ranked one is kept anyway
+    one = kept_areas(areas, stats, labels, AreaConfig(purity_candidates=1), valid_integral=ii)
+    assert [a.neurons for a in one] == [[2]]
+
+
+def test_kept_areas_grow_needs_the_disparity():
+    labels, disp, stats, areas = _speckles_and_object()
+    ii = _valid_integral(torch.ones_like(labels, dtype=torch.bool))
+    with pytest.raises(ValueError, match="grow=True needs disparity"):
+        kept_areas(areas, stats, labels, AreaConfig(grow=True), valid_integral=ii)
