@@ -58,17 +58,10 @@ def test_purity_test_rejects_sgbm_junk_on_a_computed_disparity_map(shared_data):
     """ETH3D terrace with the disparity computed by our SGBM instead of the ground truth: the most
     contrasty area is junk at the left border (no match within the search range), which the purity
     test skips (20 seeds, measured 19 useful hits with it, 3 without)."""
-    import cv2
-
-    from somtorch.disparity.scene import scene_from_arrays
-    from somtorch.disparity.stereo import SGBMParams, compute_disparity
+    from experiments.computed_disparity import computed_scene
     from somtorch.tasks.objects import AreaConfig
 
-    folder = shared_data / "eth3d/terrace"
-    gt = load_scene(folder)
-    disp, valid = compute_disparity(cv2.imread(str(folder / "im0.png")), cv2.imread(str(folder / "im1.png")),
-                                    SGBMParams(numDisparities=64))
-    scene = scene_from_arrays(disp, valid, objects=gt.objects, object_info=gt.object_info, name="eth3d_sgbm")
+    scene = computed_scene("eth3d_terrace_sgbm", shared_data)
     useful = {}
     for purity in (0.25, 0.0):
         members = run_pipeline(scene, PipelineConfig(ensemble=20, objects=AreaConfig(min_purity=purity)),
@@ -76,3 +69,15 @@ def test_purity_test_rejects_sgbm_junk_on_a_computed_disparity_map(shared_data):
         useful[purity] = sum(m.score.useful_hit for m in members)
     assert useful[0.25] >= 15, useful
     assert useful[0.0] <= 8, useful
+
+
+def test_computed_disparity_script_prints_a_row_per_scene(shared_data, capsys):
+    from experiments.computed_disparity import main
+
+    rows = main(["--runs", "2", "--scenes", "kitti2015_est", "--data-dir", str(shared_data),
+                 "--set", "objects.min_purity=0", "--set", "som.rows=6"])
+    assert [r["scene"] for r in rows] == ["kitti2015_est"] and rows[0]["runs"] == 2
+    assert 0 <= rows[0]["useful_hits"] <= rows[0]["identified_95"] <= 2
+    assert "| kitti2015_est | 2 |" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="objects.bogus=1"):
+        main(["--runs", "1", "--scenes", "kitti2015_est", "--data-dir", str(shared_data), "--set", "objects.bogus=1"])

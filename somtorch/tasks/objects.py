@@ -22,7 +22,8 @@ Image-adjacent segments of similar disparity are then joined to each kept area (
 an object split over several areas at different depths is kept whole). The box of a kept area is
 then refined (:func:`refine_box`: ground-plane clutter, stray fragments
 and thin protrusions left out) or, with ``grow``, replaced by the near region around it
-(:func:`grow_area`).
+(:func:`grow_area`); a candidate whose box is mostly other segments' pixels gives way to the next
+(``min_purity``, :func:`box_purity`). :func:`kept_areas` runs these steps in order.
 """
 
 from __future__ import annotations
