@@ -32,10 +32,10 @@ from .disparity.features import Features, make_features
 from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
 from .tasks.ground import GroundConfig, GroundPlane, fit_ground_plane
-from .tasks.objects import (AreaConfig, NeuronStats, ObjectArea, disparity_spread, find_object_areas, kept_areas,
-                            neuron_stats)
-from .tasks.reduction import Reduction, reduce_map
-from .tasks.scoring import Score, score_reduction
+from .tasks.objects import AreaConfig, NeuronStats, ObjectArea, disparity_spread, find_object_areas, neuron_stats
+from .tasks.refine import kept_areas
+from .tasks.reduction import Reduction, reduce_map, valid_integral
+from .tasks.scoring import Score, optimal_reduction, score_reduction
 from .tasks.segmentation import segment
 from .core.decay import DECAYS
 from .core.grid import TOPOLOGIES
@@ -316,9 +316,10 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         t_stats0 = _tic() - t0  # counted as object-area time, where the statistics are used
     num_k = int(ref_d.shape[-1])
     seeds = som.seeds if som is not None else [cfg.seed + e for e in range(runs)]
-    obj_mask = None
+    obj_mask, x_opt = None, None
     if scene.objects is not None:
         obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
+        x_opt = optimal_reduction(obj_mask, scene.valid)  # the same for every member
     members, t_obj, t_red = [], t_stats0, 0.0
     oc = cfg.objects
     residual = None
@@ -326,8 +327,7 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     h, w = scene.disparity.shape
     if ground is not None and oc.ground_clutter > 0 and not oc.grow:
         residual = (scene.disparity - ground.disparity(h, w)).abs()
-    valid_ii = torch.zeros(h + 1, w + 1, dtype=torch.long)
-    valid_ii[1:, 1:] = scene.valid.long().cumsum(0).cumsum(1)
+    valid_ii = valid_integral(scene.valid)
     t_obj += _tic() - t0
     if stats0 is None:  # every member segments the same pixels: their disparity spread is computed once
         t0 = _tic()
@@ -342,10 +342,11 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
                           disparity=scene.disparity, usable=usable)
         t1 = _tic()
         red = reduce_map([a.box for a in kept], scene.valid, tolerance_px=cfg.reduction.tolerance_px,
-                         tolerance_frac=cfg.reduction.tolerance_frac, tolerance_image=cfg.reduction.tolerance_image)
+                         tolerance_frac=cfg.reduction.tolerance_frac, tolerance_image=cfg.reduction.tolerance_image,
+                         integral=valid_ii)
         t_red += _tic() - t1
         t_obj += t1 - t0
-        score = score_reduction(red, obj_mask, scene.valid) if obj_mask is not None else None
+        score = score_reduction(red, obj_mask, scene.valid, x_opt=x_opt) if obj_mask is not None else None
         members.append(MemberResult(seeds[e], areas, kept, red, score, stats))
     t["objects"] = t_obj
     t["reduction"] = t_red

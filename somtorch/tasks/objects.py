@@ -18,12 +18,9 @@ Selection of the kept areas:
   ``max_areas``;
 * ``"all"`` — every area passing the size limits.
 
-Image-adjacent segments of similar disparity are then joined to each kept area (:func:`merge_adjacent`:
-an object split over several areas at different depths is kept whole). The box of a kept area is
-then refined (:func:`refine_box`: ground-plane clutter, stray fragments
-and thin protrusions left out) or, with ``grow``, replaced by the near region around it
-(:func:`grow_area`); a candidate whose box is mostly other segments' pixels gives way to the next
-(``min_purity``, :func:`box_purity`). :func:`kept_areas` runs these steps in order.
+What happens to the selected areas afterwards (joining adjacent segments, box refinement, growing,
+the purity test) is in :mod:`somtorch.tasks.refine`; :func:`~somtorch.tasks.refine.kept_areas` runs
+selection and those steps in order.
 """
 
 from __future__ import annotations
@@ -60,7 +57,7 @@ class AreaConfig:
         select: ``"nearest"``, ``"salient"`` or ``"all"``.
         merge: join to each kept area the image-adjacent segments whose mean disparity is within
             ``merge ×`` its contrast of its own (other parts of the same object at another depth, see
-            :func:`merge_adjacent`); 0 = off. Measured (100 runs, OR, useful hits Motorcycle / KITTI /
+            :func:`~somtorch.tasks.refine.merge_adjacent`); 0 = off. Measured (100 runs, OR, useful hits Motorcycle / KITTI /
             FlyingThings3D / ETH3D / OAK-D toy): off 87/91/85/93/85, 0.5 99/91/87/93/91, 0.75
             99/91/100/93/99, 1.0 93/91/100/91/100.
         min_purity: a kept area's (joined, refined) box must be at least this share its own pixels,
@@ -82,7 +79,7 @@ class AreaConfig:
             box (1.0 = the box of all the segments' pixels, the paper's reading).
         box_quantile: the box spans the ``box_quantile`` … ``1 − box_quantile`` quantiles of the kept
             pixels' coordinates, so a thin protrusion (an antenna, an SGBM streak: ~0.1 % of the
-            pixels) does not move an edge; 0 = the full extent. See :func:`refine_box`.
+            pixels) does not move an edge; 0 = the full extent. See :func:`~somtorch.tasks.refine.refine_box`.
         ground_clutter: pieces of a kept area lying on the ground plane (more than half of their
             pixels within ``ground_clutter ×`` the plane's inlier band) are left out of its box:
             streaks of a computed floor that share the object's disparity. 0 = off; no effect
@@ -347,221 +344,3 @@ def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | 
     for i, a in enumerate(ranked):
         a.rank = i
     return ranked
-
-
-def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float = 0.75, min_boundary: float = 0.1,
-                   max_area_frac: float = 1.0, exclude: torch.Tensor | None = None) -> list[ObjectArea]:
-    """Join to each kept area the segments that are other parts of the same object (``AreaConfig.merge``).
-
-    A segment (one neuron's pixels) joins if it touches the growing group in the image (their common
-    boundary is at least ``min_boundary`` of the segment's boundary with other segments) and its
-    mean disparity differs from the kept area's by at most ``ratio ×`` the kept area's contrast:
-    a motorcycle's front wheel, the far side of a toy, the top of a slanted box, which the
-    similarity rule put into other areas (often together with background). Joining repeats, one
-    ring of segments at a time, until nothing joins or the next ring would take the group beyond
-    ``max_area_frac`` of the valid pixels. A segment joins at most one group; a kept area that a
-    better-ranked one absorbed is dropped.
-
-    ``exclude`` ``(K,)`` bool marks segments that may not join (those of areas kept already).
-
-    Returns:
-        the kept areas in rank order; a grown area lists all its neurons, the union of the segment
-        boxes, the pixel-weighted mean disparity, the selected area's contrast and
-        ``extra["merged_segments"]``.
-    """
-    if ratio <= 0 or not kept:
-        return kept
-    k = int(stats.count.shape[0])
-    per = stats.perimeter
-    mean_d = torch.nan_to_num(stats.mean_d, nan=float("inf"))  # empty segments never join
-    total = float(stats.count.sum())
-    taken = torch.zeros(k, dtype=torch.bool) if exclude is None else exclude.clone()
-    out = []
-    for a in kept:
-        group = torch.zeros(k, dtype=torch.bool)
-        group[torch.tensor(a.neurons)] = True
-        if bool((group & taken).any()):
-            continue
-        similar = (mean_d - a.mean_disparity).abs() <= ratio * max(a.contrast, 0.0)
-        while True:
-            shared = stats.boundary[:, group].sum(1)
-            ring = ~group & ~taken & similar & (shared > 0) & (shared >= min_boundary * per)
-            if not bool(ring.any()) or float(stats.count[group | ring].sum()) > max_area_frac * total:
-                break
-            group |= ring
-        taken |= group
-        added = int(group.sum()) - len(a.neurons)
-        if added == 0:
-            out.append(a)
-            continue
-        idx = group.nonzero().flatten()
-        cnt = stats.count[idx]
-        b = stats.box[idx][cnt > 0]
-        box = (int(b[:, 0].min()), int(b[:, 1].min()), int(b[:, 2].max()), int(b[:, 3].max()))
-        n = float(cnt.sum())
-        mean = float((torch.nan_to_num(stats.mean_d[idx]) * cnt).sum() / n)
-        out.append(ObjectArea(idx.tolist(), int(n), box, mean, a.contrast, n / total, a.rank,
-                              {**a.extra, "merged_segments": added}))
-    for i, a in enumerate(out):
-        a.rank = i
-    return out
-
-
-def grow_area(area: ObjectArea, labels: torch.Tensor, disparity: torch.Tensor, usable: torch.Tensor,
-              *, stride: int = 2) -> ObjectArea:
-    """The image-connected region of pixels nearer than ``mean_disparity − contrast/2`` that touches
-    the area's pixels (see ``AreaConfig.grow``). Returns a new :class:`ObjectArea` with the grown box
-    and pixel count (neurons, disparity and contrast unchanged).
-
-    Shape:
-        ``labels``, ``disparity``, ``usable``: ``(H, W)``; ``usable`` marks the pixels that may join
-        (valid, not ground).
-    """
-    import cv2
-    import numpy as np
-
-    if area.contrast <= 0:
-        return area
-    thr = area.mean_disparity - 0.5 * area.contrast
-    s = max(1, int(stride))
-    lab = labels[::s, ::s].cpu().numpy()
-    near = (usable[::s, ::s] & (disparity[::s, ::s] >= thr)).cpu().numpy()
-    seed = np.isin(lab, np.asarray(area.neurons)) & near
-    if not seed.any():
-        return area
-    n, comp = cv2.connectedComponents(near.astype(np.uint8), connectivity=8)
-    hit = np.unique(comp[seed])
-    hit = hit[hit > 0]
-    region = np.isin(comp, hit)
-    ys, xs = np.nonzero(region)
-    h, w = labels.shape
-    box = (int(xs.min()) * s, int(ys.min()) * s, min(w - 1, int(xs.max()) * s + s - 1),
-           min(h - 1, int(ys.max()) * s + s - 1))
-    return ObjectArea(area.neurons, int(region.sum()) * s * s, box, area.mean_disparity, area.contrast,
-                      area.area_frac, area.rank, {**area.extra, "grown": True, "grow_threshold": thr})
-
-
-def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = 0.99, quantile: float = 0.0,
-               stride: int = 2, ground_residual: torch.Tensor | None = None,
-               clutter_band: float = 0.0) -> ObjectArea:
-    """The box of the object inside a kept area, without the parts of its segments that are not it.
-
-    The area's pixels are split into image-connected pieces (8-connectivity, on every ``stride``-th
-    pixel), then
-
-    1. pieces lying on the ground plane are dropped: more than half of their pixels within
-       ``clutter_band`` px of the plane (``ground_residual`` = |disparity − plane disparity|). A computed
-       (SGBM) floor has streaks off the RANSAC inlier band that share the object's disparity; they
-       are image-disconnected from the object and flat on the ground, the object is neither;
-    2. the largest remaining pieces holding ``coverage`` of their pixels are kept (stray fragments of
-       the segments far from the object do not stretch the box; 1.0 keeps all);
-    3. the box spans the ``quantile`` … ``1 − quantile`` range of the kept pixels' x and y, so a
-       1–2 px wide protrusion (an antenna, a cable, an SGBM streak) does not move an edge
-       (0 = the full extent).
-
-    Every step keeps the area unchanged if it would drop all pixels.
-
-    Shape:
-        ``labels`` ``(H, W)`` long; ``ground_residual`` ``(H, W)`` or None (no ground plane).
-    """
-    import cv2
-    import numpy as np
-
-    if coverage >= 1.0 and quantile <= 0.0 and (ground_residual is None or clutter_band <= 0):
-        return area
-    s = max(1, int(stride))
-    mask = np.isin(labels[::s, ::s].cpu().numpy(), np.asarray(area.neurons))
-    n, comp, st, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
-    if n <= 1:
-        return area
-    sizes = st[1:, cv2.CC_STAT_AREA].astype(np.float64)
-    pieces = np.arange(1, n)
-    dropped = 0
-    if ground_residual is not None and clutter_band > 0:
-        res = ground_residual[::s, ::s].cpu().numpy()
-        on_ground = np.bincount(comp[mask], weights=(res[mask] < clutter_band), minlength=n)[1:] / sizes
-        flat = on_ground > 0.5
-        if not flat.all():
-            dropped = int(flat.sum())
-            pieces, sizes = pieces[~flat], sizes[~flat]
-    order = np.argsort(-sizes, kind="stable")
-    need = min(coverage, 1.0) * sizes.sum()
-    pieces = pieces[order[: int(np.searchsorted(np.cumsum(sizes[order]), need - 1e-9)) + 1]]
-    take = np.zeros(n, dtype=bool)
-    take[pieces] = True
-    ys, xs = np.nonzero(take[comp])
-    q = min(max(quantile, 0.0), 0.5)
-    x0, x1 = np.quantile(xs, [q, 1 - q], method="inverted_cdf") if q > 0 else (xs.min(), xs.max())
-    y0, y1 = np.quantile(ys, [q, 1 - q], method="inverted_cdf") if q > 0 else (ys.min(), ys.max())
-    h, w = labels.shape
-    box = (int(x0) * s, int(y0) * s, min(w - 1, int(x1) * s + s - 1), min(h - 1, int(y1) * s + s - 1))
-    # never larger than the box of all the area's pixels (stride rounding)
-    box = (max(area.box[0], box[0]), max(area.box[1], box[1]), min(area.box[2], box[2]), min(area.box[3], box[3]))
-    return ObjectArea(area.neurons, area.pixels, box, area.mean_disparity, area.contrast, area.area_frac,
-                      area.rank, {**area.extra, "segment_box": area.box, "box_coverage": coverage,
-                                  "box_quantile": quantile, "ground_clutter_pieces": dropped})
-
-
-def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Tensor) -> float:
-    """Share of the valid pixels inside ``area.box`` that belong to the area's segments.
-
-    Shape:
-        ``labels`` ``(H, W)``; ``valid_integral`` ``(H+1, W+1)``: the integral image of the valid mask.
-    """
-    x0, y0, x1, y1 = area.box
-    ii = valid_integral
-    n_valid = int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0])
-    crop = labels[y0:y1 + 1, x0:x1 + 1]
-    own = int(torch.isin(crop, torch.tensor(area.neurons, dtype=labels.dtype)).sum())
-    return own / max(n_valid, 1)
-
-
-def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig, *,
-               valid_integral: torch.Tensor, ground_residual: torch.Tensor | None = None,
-               clutter_band: float = 0.0, disparity: torch.Tensor | None = None,
-               usable: torch.Tensor | None = None) -> list[ObjectArea]:
-    """Step 1c after the areas are found: select, join, refine (or grow) and check the purity.
-
-    Candidates are taken in rank order (:func:`select_areas`); each is joined with its adjacent
-    segments (:func:`merge_adjacent`, never with segments of an area kept before it), its box refined
-    (:func:`refine_box`) or grown (:func:`grow_area`, needs ``disparity`` and ``usable``), and kept if
-    its :func:`box_purity` reaches ``cfg.min_purity``, until ``cfg.max_areas`` are kept or
-    ``cfg.max_areas + cfg.purity_candidates − 1`` candidates were tried. If none passed, the
-    best-ranked candidate is kept anyway. Each kept area has ``extra["purity"]``.
-
-    Shape:
-        ``labels`` ``(H, W)``; ``valid_integral`` ``(H+1, W+1)``; ``ground_residual``, ``disparity``,
-        ``usable`` ``(H, W)``.
-    """
-    from dataclasses import replace
-
-    tries = cfg.max_areas + (cfg.purity_candidates - 1 if cfg.min_purity > 0 else 0)
-    ranked = select_areas(areas, stats, replace(cfg, max_areas=tries))
-    taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
-    kept, first = [], None
-    for cand in ranked:
-        if bool(taken[torch.tensor(cand.neurons)].any()):
-            continue
-        joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
-                                max_area_frac=cfg.max_area_frac, exclude=taken)[0]
-        if cfg.grow:
-            if disparity is None or usable is None:
-                raise ValueError("kept_areas: grow=True needs disparity and usable")
-            done = grow_area(joined, labels, disparity, usable, stride=cfg.grow_stride)
-        else:
-            done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
-                              stride=cfg.grow_stride, ground_residual=ground_residual, clutter_band=clutter_band)
-        purity = box_purity(done, labels, valid_integral)
-        done = replace(done, extra={**done.extra, "purity": purity})
-        if first is None:
-            first = done
-        if purity >= cfg.min_purity:
-            kept.append(done)
-            taken[torch.tensor(done.neurons)] = True
-            if len(kept) == cfg.max_areas:
-                break
-    if not kept and first is not None:
-        kept = [first]
-    for i, a in enumerate(kept):
-        a.rank = i
-    return kept

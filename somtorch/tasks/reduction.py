@@ -65,8 +65,16 @@ def expand_box(box: Box, shape: tuple[int, int], *, tolerance_px: float = 0.0,
             min(h - 1, math.ceil(y1 + my)))
 
 
+def valid_integral(valid: torch.Tensor) -> torch.Tensor:
+    """Integral image of a bool mask ``(H, W)`` → ``(H+1, W+1)`` long: the count inside any box in O(1)."""
+    ii = torch.zeros(valid.shape[0] + 1, valid.shape[1] + 1, dtype=torch.long, device=valid.device)
+    ii[1:, 1:] = valid.long().cumsum(0).cumsum(1)
+    return ii
+
+
 def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = 0.0,
-               tolerance_frac: float = 0.05, tolerance_image: float = 0.0) -> Reduction:
+               tolerance_frac: float = 0.05, tolerance_image: float = 0.0,
+               integral: torch.Tensor | None = None) -> Reduction:
     """Keep the pixels inside the (enlarged) boxes.
 
     The three margins add up. ``tolerance_frac`` (the paper's reading: a frame around the area that
@@ -80,6 +88,8 @@ def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = 0
         tolerance_px: margin in pixels added on every side.
         tolerance_frac: margin as a fraction of the box's width / height added on every side.
         tolerance_image: margin as a fraction of the image diagonal added on every side.
+        integral: :func:`valid_integral` of ``valid`` if the caller already has it (the pipeline
+            reuses one for all members).
     """
     check_tensor("valid", valid, ndim=2, dtype=torch.bool)
     check_positive("tolerance_px", tolerance_px, allow_zero=True)
@@ -87,8 +97,10 @@ def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = 0
     check_positive("tolerance_image", tolerance_image, allow_zero=True)
     shape = (int(valid.shape[0]), int(valid.shape[1]))
     # an integral image of the valid mask gives each box's valid count in O(1)
-    ii = torch.zeros(shape[0] + 1, shape[1] + 1, dtype=torch.long, device=valid.device)
-    ii[1:, 1:] = valid.long().cumsum(0).cumsum(1)
+    ii = valid_integral(valid) if integral is None else integral
+    if tuple(ii.shape) != (shape[0] + 1, shape[1] + 1):
+        raise ValueError(f"integral has shape {tuple(ii.shape)}; expected {(shape[0] + 1, shape[1] + 1)} "
+                         f"for the {shape[1]}x{shape[0]} valid mask")
     mask = torch.zeros(shape, dtype=torch.bool, device=valid.device)
     kept_boxes, crops = [], []
     for i, b in enumerate(boxes):

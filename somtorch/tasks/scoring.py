@@ -45,8 +45,12 @@ def optimal_reduction(object_mask: torch.Tensor, valid: torch.Tensor) -> float:
 
 
 def score_reduction(reduction: Reduction, object_mask: torch.Tensor, valid: torch.Tensor,
-                    *, useful_factor: float = 0.75) -> Score:
-    """Score one reduced map against an object mask ``(H, W)`` bool."""
+                    *, useful_factor: float = 0.75, x_opt: float | None = None) -> Score:
+    """Score one reduced map against an object mask ``(H, W)`` bool.
+
+    ``x_opt``: :func:`optimal_reduction` of the same mask and valid pixels if already known (it does
+    not depend on the reduction, so the members of an ensemble share one).
+    """
     check_tensor("object_mask", object_mask, ndim=2, dtype=torch.bool)
     if object_mask.shape != valid.shape or reduction.mask.shape != valid.shape:
         raise ValueError(f"object_mask {tuple(object_mask.shape)}, valid {tuple(valid.shape)} and the "
@@ -56,7 +60,8 @@ def score_reduction(reduction: Reduction, object_mask: torch.Tensor, valid: torc
     if n_obj == 0:
         raise ValueError("the object has no pixel with a valid disparity: it cannot be scored")
     frac = int((obj & reduction.mask).sum()) / n_obj
-    x_opt = optimal_reduction(object_mask, valid)
+    if x_opt is None:
+        x_opt = optimal_reduction(object_mask, valid)
     red = reduction.reduction_union
     return Score(frac, frac >= 1.0, frac >= 0.95, red, reduction.reduction_crops, x_opt,
                  frac >= 0.95 and red >= useful_factor * x_opt)

@@ -119,3 +119,16 @@ def test_image_tolerance_is_a_fraction_of_the_image_diagonal_for_every_box():
     assert reduce_map([small], valid, tolerance_px=1, tolerance_frac=0.5, tolerance_image=0.02).boxes == [(7, 7, 14, 14)]
     with pytest.raises(ValueError, match="tolerance_image"):
         reduce_map([small], valid, tolerance_image=-0.1)
+
+
+def test_a_precomputed_integral_gives_the_same_reduction_and_must_fit_the_mask():
+    from somtorch.tasks.reduction import valid_integral
+
+    valid = torch.rand(30, 40, generator=torch.Generator().manual_seed(3)) > 0.3
+    boxes = [(2, 3, 20, 12), (15, 10, 39, 29)]
+    plain = reduce_map(boxes, valid, tolerance_image=0.02)
+    shared = reduce_map(boxes, valid, tolerance_image=0.02, integral=valid_integral(valid))
+    assert (shared.boxes, shared.kept_union, shared.kept_crops, shared.crops_valid) == \
+        (plain.boxes, plain.kept_union, plain.kept_crops, plain.crops_valid)
+    with pytest.raises(ValueError, match="integral has shape"):
+        reduce_map(boxes, valid, integral=valid_integral(valid[:, :-1]))

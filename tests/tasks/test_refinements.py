@@ -6,8 +6,9 @@ import pytest
 import torch
 
 from somtorch.disparity.filters import remove_speckles
-from somtorch.tasks.objects import (AreaConfig, ObjectArea, box_purity, find_object_areas, grow_area, kept_areas,
-                                    merge_adjacent, neuron_stats, refine_box, select_areas)
+from somtorch.tasks.objects import AreaConfig, ObjectArea, find_object_areas, neuron_stats, select_areas
+from somtorch.tasks.reduction import valid_integral
+from somtorch.tasks.refine import box_purity, grow_area, kept_areas, merge_adjacent, refine_box
 
 
 def _area(neurons, box, mean_d=50.0, contrast=40.0):
@@ -134,19 +135,13 @@ def test_remove_speckles_drops_small_islands_only():
     assert not remove_speckles(disp, ~valid).any()  # nothing valid stays nothing
 
 
-def _valid_integral(valid):
-    ii = torch.zeros(valid.shape[0] + 1, valid.shape[1] + 1, dtype=torch.long)
-    ii[1:, 1:] = valid.long().cumsum(0).cumsum(1)
-    return ii
-
-
 def test_box_purity_is_the_share_of_the_boxs_valid_pixels_that_are_the_areas_own():
     labels = torch.zeros(40, 40, dtype=torch.long)
     labels[10:20, 10:30] = 1  # 200 px of the area ...
     valid = torch.ones(40, 40, dtype=torch.bool)
     valid[10:20, 20:30] = False  # ... of which 100 have no disparity (and count in neither)
     labels[~valid] = -1
-    ii = _valid_integral(valid)
+    ii = valid_integral(valid)
     assert box_purity(_area([1], (10, 10, 29, 19)), labels, ii) == 1.0
     assert box_purity(_area([1], (10, 10, 29, 29)), labels, ii) == 100 / (100 + 10 * 20)
 
@@ -165,8 +160,8 @@ def _speckles_and_object():
 
 
 def test_kept_areas_skips_a_speckle_area_whose_box_is_mostly_other_pixels():
-    labels, disp, stats, areas = _speckles_and_object()
-    ii = _valid_integral(torch.ones_like(labels, dtype=torch.bool))
+    labels, _, stats, areas = _speckles_and_object()
+    ii = valid_integral(torch.ones_like(labels, dtype=torch.bool))
     ranked = select_areas(areas, stats, AreaConfig(max_areas=3))
     assert ranked[0].neurons == [2]  # the speckles rank first by contrast x size
     kept = kept_areas(areas, stats, labels, AreaConfig(), valid_integral=ii)
@@ -181,7 +176,7 @@ def test_kept_areas_skips_a_speckle_area_whose_box_is_mostly_other_pixels():
 
 
 def test_kept_areas_grow_needs_the_disparity():
-    labels, disp, stats, areas = _speckles_and_object()
-    ii = _valid_integral(torch.ones_like(labels, dtype=torch.bool))
+    labels, _, stats, areas = _speckles_and_object()
+    ii = valid_integral(torch.ones_like(labels, dtype=torch.bool))
     with pytest.raises(ValueError, match="grow=True needs disparity"):
         kept_areas(areas, stats, labels, AreaConfig(grow=True), valid_integral=ii)

@@ -92,6 +92,14 @@ def test_useful_factor_is_a_parameter():
     assert not s.useful_hit
 
 
+def test_a_known_x_opt_is_used_as_given():
+    obj, valid = _object()
+    red = reduce_map([(5, 10, 39, 30)], valid, tolerance_frac=0.0)
+    computed = score_reduction(red, obj, valid)
+    assert score_reduction(red, obj, valid, x_opt=computed.x_opt) == computed
+    assert score_reduction(red, obj, valid, x_opt=99.0).x_opt == 99.0
+
+
 def test_score_as_dict_has_every_field():
     obj, valid = _object()
     d = _score([(20, 10, 39, 14)], obj, valid).as_dict()
