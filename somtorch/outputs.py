@@ -62,7 +62,9 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "n_areas": len(m.areas),
             "kept_areas": [{"neurons": a.neurons, "pixels": a.pixels, "box_xyxy": list(a.box),
                             "mean_disparity": a.mean_disparity, "contrast": a.contrast,
-                            "area_frac": a.area_frac} for a in m.kept],
+                            "area_frac": a.area_frac,
+                            **{k: _finite(float(a.extra[k])) for k in ("purity", "solidity") if k in a.extra}}
+                           for a in m.kept],
             "kept_boxes_xyxy": [list(b) for b in m.reduction.boxes],
             "kept_valid_union": m.reduction.kept_union,
             "kept_valid_crops": m.reduction.kept_crops,

@@ -189,6 +189,35 @@ def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Ten
     return own / max(n_valid, 1)
 
 
+def solidity(mask: torch.Tensor, *, size: float = 0.02, stride: int = 2) -> float:
+    """Share of the pixels of ``mask`` that survive a morphological opening with a square of side
+    ``size ×`` the shorter image side (on every ``stride``-th pixel; the nearest odd number of
+    samples, at least 3): about 1 for a solid region, near 0 for scattered speckles and 1–2 px
+    thin streaks (SGBM mismatches on textureless walls and ceilings), which no such square fits in.
+
+    Shape:
+        ``mask`` ``(H, W)`` bool.
+    """
+    s = max(1, int(stride))
+    return _opened_share(mask[::s, ::s], _square(mask.shape, size, s))
+
+
+def _square(shape: tuple[int, ...], size: float, stride: int) -> int:
+    return max(3, 2 * round(size * min(shape) / stride / 2) + 1)  # odd: a centred, symmetric square
+
+
+def _opened_share(sampled: torch.Tensor, k: int) -> float:
+    import cv2
+    import numpy as np
+
+    m = sampled.cpu().numpy().astype(np.uint8)
+    n = int(m.sum())
+    if n == 0:
+        return 0.0
+    opened = cv2.morphologyEx(m, cv2.MORPH_OPEN, np.ones((k, k), np.uint8))
+    return float((opened & m).sum()) / n
+
+
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig, *,
                valid_integral: torch.Tensor, ground_residual: torch.Tensor | None = None,
                clutter_band: float = 0.0, disparity: torch.Tensor | None = None,
@@ -198,18 +227,23 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     Candidates are taken in rank order (:func:`select_areas`); each is joined with its adjacent
     segments (:func:`merge_adjacent`, never with segments of an area kept before it), its box refined
     (:func:`refine_box`) or grown (:func:`grow_area`, needs ``disparity`` and ``usable``), and kept if
-    its :func:`box_purity` reaches ``cfg.min_purity``, until ``cfg.max_areas`` are kept or
-    ``cfg.max_areas + cfg.purity_candidates − 1`` candidates were tried. If none passed, the
-    best-ranked candidate is kept anyway. Each kept area has ``extra["purity"]``.
+    its :func:`box_purity` reaches ``cfg.min_purity`` and its segments' :func:`solidity` reaches
+    ``cfg.min_solidity ×`` the solidity of all the segmented pixels (so a sparse map, whose valid
+    pixels are themselves scattered, is not held to a dense map's standard), until
+    ``cfg.max_areas`` are kept or ``cfg.max_areas + cfg.purity_candidates − 1`` candidates were
+    tried. If none passed, the best-ranked candidate is kept anyway. Each kept area has
+    ``extra["purity"]`` and ``extra["solidity"]`` (relative to the map's), whether checked or not.
 
     Shape:
         ``labels`` ``(H, W)``; ``valid_integral`` ``(H+1, W+1)``; ``ground_residual``, ``disparity``,
         ``usable`` ``(H, W)``.
     """
-    tries = cfg.max_areas + (cfg.purity_candidates - 1 if cfg.min_purity > 0 else 0)
+    checks = cfg.min_purity > 0 or cfg.min_solidity > 0
+    tries = cfg.max_areas + (cfg.purity_candidates - 1 if checks else 0)
     ranked = select_areas(areas, stats, replace(cfg, max_areas=tries))
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first = [], None
+    map_solidity = None
     for cand in ranked:
         if bool(taken[torch.tensor(cand.neurons)].any()):
             continue
@@ -223,10 +257,18 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                               stride=cfg.grow_stride, ground_residual=ground_residual, clutter_band=clutter_band)
         purity = box_purity(done, labels, valid_integral)
-        done = replace(done, extra={**done.extra, "purity": purity})
+        extra = {**done.extra, "purity": purity}
+        if map_solidity is None:  # on every grow_stride-th pixel, like the box refinement
+            lab_s = labels[::cfg.grow_stride, ::cfg.grow_stride]
+            square = _square(labels.shape, cfg.solidity_size, cfg.grow_stride)
+            map_solidity = max(_opened_share(lab_s >= 0, square), 1e-9)
+        own = torch.isin(lab_s, torch.tensor(done.neurons, dtype=labels.dtype))
+        extra["solidity"] = _opened_share(own, square) / map_solidity
+        solid_ok = extra["solidity"] >= cfg.min_solidity
+        done = replace(done, extra=extra)
         if first is None:
             first = done
-        if purity >= cfg.min_purity:
+        if purity >= cfg.min_purity and solid_ok:
             kept.append(done)
             taken[torch.tensor(done.neurons)] = True
             if len(kept) == cfg.max_areas:

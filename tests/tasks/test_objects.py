@@ -241,6 +241,8 @@ def test_neuron_stats_rejects_bad_inputs():
     {"min_area_frac": -0.1}, {"min_area_frac": 0.5, "max_area_frac": 0.5},
     {"box_quantile": 0.5}, {"box_quantile": -0.01}, {"ground_clutter": -1.0}, {"merge": -0.5},
     {"merge": float("nan")}, {"min_purity": 1.5}, {"min_purity": -0.1}, {"purity_candidates": 0},
+    {"min_solidity": 1.5}, {"min_solidity": -0.1}, {"min_solidity": float("nan")}, {"solidity_size": 0.0},
+    {"solidity_size": 0.6}, {"solidity_size": float("nan")},
 ])
 def test_area_config_rejects_bad_values(kwargs):
     with pytest.raises(ValueError, match="|".join(kwargs)):

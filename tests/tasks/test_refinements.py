@@ -8,7 +8,7 @@ import torch
 from somtorch.disparity.filters import remove_speckles
 from somtorch.tasks.objects import AreaConfig, ObjectArea, find_object_areas, neuron_stats, select_areas
 from somtorch.tasks.reduction import valid_integral
-from somtorch.tasks.refine import box_purity, grow_area, kept_areas, merge_adjacent, refine_box
+from somtorch.tasks.refine import box_purity, grow_area, kept_areas, merge_adjacent, refine_box, solidity
 
 
 def _area(neurons, box, mean_d=50.0, contrast=40.0):
@@ -168,11 +168,61 @@ def test_kept_areas_skips_a_speckle_area_whose_box_is_mostly_other_pixels():
     assert [a.neurons for a in kept] == [[1]]
     assert kept[0].box == (10, 20, 29, 39) and kept[0].extra["purity"] == 1.0
     # without the test (min_purity 0, the paper's behaviour) the speckles are kept
-    off = kept_areas(areas, stats, labels, AreaConfig(min_purity=0.0), valid_integral=ii)
+    off = kept_areas(areas, stats, labels, AreaConfig(min_purity=0.0, min_solidity=0.0), valid_integral=ii)
     assert [a.neurons for a in off] == [[2]] and off[0].extra["purity"] < 0.05
     # a single candidate allowed: nothing passes, so the best-ranked one is kept anyway
     one = kept_areas(areas, stats, labels, AreaConfig(purity_candidates=1), valid_integral=ii)
     assert [a.neurons for a in one] == [[2]]
+
+
+def test_solidity_is_one_for_a_solid_region_and_zero_for_streaks_and_speckles():
+    h, w = 200, 300  # square side: 2 % of 200 = 4 px = 2 samples at stride 2, rounded up to 3 (odd)
+    block = torch.zeros(h, w, dtype=torch.bool)
+    block[40:100, 50:150] = True
+    assert solidity(block) == 1.0
+    streaks = torch.zeros(h, w, dtype=torch.bool)
+    streaks[0:60:4, 100:250] = True  # 1 px high lines, 4 px apart (SGBM on a ceiling)
+    assert solidity(streaks) == 0.0
+    speckles = torch.zeros(h, w, dtype=torch.bool)
+    speckles[::6, ::6] = True
+    assert solidity(speckles) == 0.0
+    assert solidity(torch.zeros(h, w, dtype=torch.bool)) == 0.0
+    both = block | streaks
+    sampled = both[::2, ::2]
+    assert solidity(both) == pytest.approx(float(block[::2, ::2].sum()) / float(sampled.sum()))
+    # a larger square (10 % of 200 = 20 px: 11 samples) does not fit into an 18 px high bar
+    bar = torch.zeros(h, w, dtype=torch.bool)
+    bar[40:58, 20:280] = True
+    assert solidity(bar) == 1.0 and solidity(bar, size=0.1) == 0.0
+
+
+def _streaks_and_object():
+    # background (segment 0) at 10 px; a compact object (segment 1) at 40 px; 1 px high streaks
+    # (segment 2) at 90 px with no disparity between them, so their box is all their own valid pixels
+    h, w = 120, 160
+    disp = torch.full((h, w), 10.0)
+    valid = torch.ones(h, w, dtype=torch.bool)
+    labels = torch.zeros(h, w, dtype=torch.long)
+    labels[60:100, 20:60], disp[60:100, 20:60] = 1, 40.0
+    valid[0:30, 80:150] = False
+    labels[0:30, 80:150] = -1
+    labels[0:30:3, 80:150], disp[0:30:3, 80:150], valid[0:30:3, 80:150] = 2, 90.0, True
+    stats = neuron_stats(labels, disp, 3)
+    areas = find_object_areas(torch.tensor([10.0, 40.0, 90.0]), None, stats, AreaConfig())
+    return labels, valid, stats, areas
+
+
+def test_kept_areas_skips_thin_streaks_by_their_solidity():
+    labels, valid, stats, areas = _streaks_and_object()
+    ii = valid_integral(valid)
+    ranked = select_areas(areas, stats, AreaConfig(max_areas=3))
+    assert ranked[0].neurons == [2]  # the streaks rank first
+    kept = kept_areas(areas, stats, labels, AreaConfig(), valid_integral=ii)
+    assert [a.neurons for a in kept] == [[1]] and kept[0].extra["solidity"] > 0.9
+    # the purity test alone does not catch them: their box holds no other valid pixel
+    off = kept_areas(areas, stats, labels, AreaConfig(min_solidity=0.0), valid_integral=ii)
+    assert [a.neurons for a in off] == [[2]]
+    assert off[0].extra["purity"] == 1.0 and off[0].extra["solidity"] == 0.0
 
 
 def test_kept_areas_grow_needs_the_disparity():
