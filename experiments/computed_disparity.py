@@ -57,7 +57,7 @@ def computed_scene(name: str, data_dir: Path = DATA) -> Scene:
     return scene_from_arrays(disp, valid, objects=gt.objects, object_info=gt.object_info, name=name)
 
 
-def _override(cfg: PipelineConfig, assignment: str) -> PipelineConfig:
+def apply_override(cfg: PipelineConfig, assignment: str) -> PipelineConfig:
     """``group.field=value`` on a copy of ``cfg`` (value parsed as the field's current type)."""
     key, _, value = assignment.partition("=")
     group, _, fld = key.partition(".")
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         raise SystemExit(f"{args.data_dir}: the shared data folder does not exist")
     cfg = PipelineConfig(ensemble=args.runs, seed=args.seed)
     for a in args.set:
-        cfg = _override(cfg, a)
+        cfg = apply_override(cfg, a)
     rows = []
     print("| scene | runs | ≥ 95 % | useful hits | mean reduction | x_opt | ≥ 95 % per object id |")
     print("|---|---|---|---|---|---|---|")

@@ -24,7 +24,7 @@ import numpy as np
 from somtorch.disparity.scene import load_scene
 from somtorch.pipeline import PipelineConfig, run_pipeline
 
-from .computed_disparity import DATA, _override
+from .computed_disparity import DATA, apply_override
 
 SCENES = ("oakd_stereodemo/corridor", "oakd_stereodemo/desk", "oakd_stereodemo/kid_bedroom",
           "oakd_stereodemo/pov_controllers")
@@ -47,7 +47,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         raise SystemExit(f"scene folders not found under {args.data_dir}: {missing}")
     cfg = PipelineConfig(ensemble=args.runs, seed=args.seed)
     for a in args.set:
-        cfg = _override(cfg, a)
+        cfg = apply_override(cfg, a)
     rows = []
     print(f"| scene | runs | purity < {BOUND} | solidity < {BOUND} | median purity | median solidity |")
     print("|---|---|---|---|---|---|")
