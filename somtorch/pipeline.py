@@ -33,7 +33,7 @@ from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
 from .tasks.ground import GroundConfig, GroundPlane, fit_ground_plane
 from .tasks.objects import AreaConfig, NeuronStats, ObjectArea, disparity_spread, find_object_areas, neuron_stats
-from .tasks.refine import kept_areas
+from .tasks.refine import kept_areas, map_solidity
 from .tasks.reduction import Reduction, reduce_map, valid_integral
 from .tasks.scoring import Score, optimal_reduction, score_reduction
 from .tasks.segmentation import segment
@@ -328,6 +328,7 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     if ground is not None and oc.ground_clutter > 0 and not oc.grow:
         residual = (scene.disparity - ground.disparity(h, w)).abs()
     valid_ii = valid_integral(scene.valid)
+    seg_solidity = map_solidity(labels[0], oc)  # every member segments the same pixels
     t_obj += _tic() - t0
     if stats0 is None:  # every member segments the same pixels: their disparity spread is computed once
         t0 = _tic()
@@ -339,7 +340,7 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         areas = find_object_areas(ref_d[e], grid_d2, stats, oc)
         kept = kept_areas(areas, stats, labels[e], oc, valid_integral=valid_ii, ground_residual=residual,
                           clutter_band=oc.ground_clutter * ground.tol if ground is not None else 0.0,
-                          disparity=scene.disparity, usable=usable)
+                          disparity=scene.disparity, usable=usable, segmented_solidity=seg_solidity)
         t1 = _tic()
         red = reduce_map([a.box for a in kept], scene.valid, tolerance_px=cfg.reduction.tolerance_px,
                          tolerance_frac=cfg.reduction.tolerance_frac, tolerance_image=cfg.reduction.tolerance_image,

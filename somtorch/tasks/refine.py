@@ -218,10 +218,16 @@ def _opened_share(sampled: torch.Tensor, k: int) -> float:
     return float((opened & m).sum()) / n
 
 
+def map_solidity(labels: torch.Tensor, cfg: AreaConfig) -> float:
+    """:func:`solidity` of all the segmented pixels (``labels >= 0``), the reference of
+    ``cfg.min_solidity``; the same for every member of an ensemble (they segment the same pixels)."""
+    return max(solidity(labels >= 0, size=cfg.solidity_size, stride=cfg.grow_stride), 1e-9)
+
+
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig, *,
                valid_integral: torch.Tensor, ground_residual: torch.Tensor | None = None,
                clutter_band: float = 0.0, disparity: torch.Tensor | None = None,
-               usable: torch.Tensor | None = None) -> list[ObjectArea]:
+               usable: torch.Tensor | None = None, segmented_solidity: float | None = None) -> list[ObjectArea]:
     """Step 1c after the areas are found: select, join, refine (or grow) and check the purity.
 
     Candidates are taken in rank order (:func:`select_areas`); each is joined with its adjacent
@@ -233,6 +239,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     ``cfg.max_areas`` are kept or ``cfg.max_areas + cfg.purity_candidates − 1`` candidates were
     tried. If none passed, the best-ranked candidate is kept anyway. Each kept area has
     ``extra["purity"]`` and ``extra["solidity"]`` (relative to the map's), whether checked or not.
+    ``segmented_solidity``: :func:`map_solidity` if already known (computed here otherwise).
 
     Shape:
         ``labels`` ``(H, W)``; ``valid_integral`` ``(H+1, W+1)``; ``ground_residual``, ``disparity``,
@@ -243,7 +250,9 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     ranked = select_areas(areas, stats, replace(cfg, max_areas=tries))
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first = [], None
-    map_solidity = None
+    ref = segmented_solidity if segmented_solidity is not None else map_solidity(labels, cfg)
+    lab_s = labels[::cfg.grow_stride, ::cfg.grow_stride]  # as in the box refinement
+    square = _square(labels.shape, cfg.solidity_size, cfg.grow_stride)
     for cand in ranked:
         if bool(taken[torch.tensor(cand.neurons)].any()):
             continue
@@ -258,12 +267,8 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
                               stride=cfg.grow_stride, ground_residual=ground_residual, clutter_band=clutter_band)
         purity = box_purity(done, labels, valid_integral)
         extra = {**done.extra, "purity": purity}
-        if map_solidity is None:  # on every grow_stride-th pixel, like the box refinement
-            lab_s = labels[::cfg.grow_stride, ::cfg.grow_stride]
-            square = _square(labels.shape, cfg.solidity_size, cfg.grow_stride)
-            map_solidity = max(_opened_share(lab_s >= 0, square), 1e-9)
         own = torch.isin(lab_s, torch.tensor(done.neurons, dtype=labels.dtype))
-        extra["solidity"] = _opened_share(own, square) / map_solidity
+        extra["solidity"] = _opened_share(own, square) / ref
         solid_ok = extra["solidity"] >= cfg.min_solidity
         done = replace(done, extra=extra)
         if first is None:

@@ -8,7 +8,7 @@ import torch
 from somtorch.disparity.filters import remove_speckles
 from somtorch.tasks.objects import AreaConfig, ObjectArea, find_object_areas, neuron_stats, select_areas
 from somtorch.tasks.reduction import valid_integral
-from somtorch.tasks.refine import box_purity, grow_area, kept_areas, merge_adjacent, refine_box, solidity
+from somtorch.tasks.refine import box_purity, grow_area, kept_areas, merge_adjacent, refine_box, map_solidity, solidity
 
 
 def _area(neurons, box, mean_d=50.0, contrast=40.0):
@@ -219,6 +219,10 @@ def test_kept_areas_skips_thin_streaks_by_their_solidity():
     assert ranked[0].neurons == [2]  # the streaks rank first
     kept = kept_areas(areas, stats, labels, AreaConfig(), valid_integral=ii)
     assert [a.neurons for a in kept] == [[1]] and kept[0].extra["solidity"] > 0.9
+    # the map's solidity handed in (as the pipeline does once for all members) gives the same result
+    shared = kept_areas(areas, stats, labels, AreaConfig(), valid_integral=ii,
+                        segmented_solidity=map_solidity(labels, AreaConfig()))
+    assert [(a.neurons, a.box, a.extra) for a in shared] == [(a.neurons, a.box, a.extra) for a in kept]
     # the purity test alone does not catch them: their box holds no other valid pixel
     off = kept_areas(areas, stats, labels, AreaConfig(min_solidity=0.0), valid_integral=ii)
     assert [a.neurons for a in off] == [[2]]
