@@ -23,38 +23,19 @@ from pathlib import Path
 
 import numpy as np
 
-from somtorch.disparity.scene import Scene, load_scene, scene_from_arrays
-from somtorch.disparity.stereo import SGBMParams, compute_disparity
+from experiments.scenes import dev_scenes, load_dev_scene
+from somtorch.disparity.scene import Scene
 from somtorch.pipeline import PipelineConfig, run_pipeline
 from somtorch.tasks.scoring import score_reduction
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-# name: (folder, left, right, numDisparities) — None: the folder ships a computed estimate
-PAIRS = {
-    "kitti2015_est": ("kitti2015/devkit_demo", None, None, 0),
-    "middlebury_motorcycle_q_sgbm": ("middlebury2014/Motorcycle_Q", "im0.png", "im1.png", 128),
-    "eth3d_terrace_sgbm": ("eth3d/terrace", "im0.png", "im1.png", 64),
-    "flyingthings3d_sgbm": ("sceneflow_flyingthings3d/A-0032-0006", "left_cleanpass.png", "right_cleanpass.png", 128),
-}
+# the development scenes whose disparity is computed (conf/scene_lists/dev.yaml)
+PAIRS = {s.name: s for s in dev_scenes() if s.computed}
 
 
 def computed_scene(name: str, data_dir: Path = DATA) -> Scene:
     """The scene ``name`` of :data:`PAIRS` with its computed disparity and the ground-truth masks."""
-    import cv2
-
-    folder, left, right, ndisp = PAIRS[name]
-    path = data_dir / folder
-    if left is None:
-        return load_scene(path, disparity_file="disp_est.png")
-    gt = load_scene(path)
-    images = []
-    for f in (left, right):
-        im = cv2.imread(str(path / f))
-        if im is None:
-            raise FileNotFoundError(f"{path / f}: missing or unreadable image")
-        images.append(im)
-    disp, valid = compute_disparity(images[0], images[1], SGBMParams(numDisparities=ndisp))
-    return scene_from_arrays(disp, valid, objects=gt.objects, object_info=gt.object_info, name=name)
+    return load_dev_scene(PAIRS[name], data_dir)
 
 
 def apply_override(cfg: PipelineConfig, assignment: str) -> PipelineConfig:

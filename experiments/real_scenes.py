@@ -23,17 +23,15 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
+from experiments.scenes import dev_scenes
 from experiments.schema import RunConfig
 
 # absolute, so that the console script and python -m find the same configs from any directory
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("somtorch.real_scenes")
 
-DEFAULT_SCENES = [
-    "middlebury2014/Motorcycle_Q", "kitti2015/devkit_demo", "sceneflow_flyingthings3d/A-0032-0006",
-    "eth3d/terrace", "oakd_stereodemo/toy", "oakd_stereodemo/selfie", "oakd_stereodemo/bedroom_chair",
-    "oakd_stereodemo/cycles",
-]
+# the development scenes given as ground truth (or as shipped), declared in conf/scene_lists/dev.yaml
+DEFAULT_SCENES = [s.folder for s in dev_scenes() if not s.computed]
 
 
 @dataclass

@@ -42,6 +42,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from experiments.run import CONF_DIR, load_input
 from experiments.schema import RunConfig, register
+from somtorch.evaluation import merge_runs, per_object_scores, run_records, summarize_runs
 
 log = logging.getLogger("somtorch.study")
 register()
@@ -103,122 +104,6 @@ def complete_metrics(path: Path, chash: str) -> dict | None:
     return m
 
 
-def _segment_f1(labels, obj) -> tuple[float, float, float]:
-    """Segmentation precision against the object mask: the union of the segments whose pixels are
-    mostly object pixels, scored as precision / recall / F1 of the object's valid pixels. Finer
-    segmentations follow the object's outline more closely (the paper's Fig. 13)."""
-    import torch
-
-    ok = labels >= 0
-    lab = labels[ok]
-    o = obj[ok]
-    k = int(lab.max()) + 1 if lab.numel() else 1
-    cnt = torch.bincount(lab, minlength=k)
-    hit = torch.bincount(lab[o], minlength=k)
-    major = hit * 2 > cnt
-    sel = major[lab]
-    tp = int((sel & o).sum())
-    p = tp / max(int(sel.sum()), 1)
-    r = tp / max(int(o.sum()), 1)
-    return p, r, (2 * p * r / (p + r) if p + r > 0 else 0.0)
-
-
-def _run_records(scene, result, obj_mask, per_run_s: list[float] | None) -> dict[str, list]:
-    """Per-run values of one pipeline result (one entry per member)."""
-    import torch
-
-    runs: dict[str, list] = {k: [] for k in (
-        "seed", "identified_fraction", "identified_100", "identified_95", "useful_hit", "reduction_union",
-        "reduction_crops", "kept_areas", "area_px", "area_frac", "area_precision", "segment_precision",
-        "segment_recall", "segment_f1", "n_areas", "quantization_error", "topographic_error", "runtime_s")}
-    t = result.timings
-    e_n = len(result.members)
-    shared = sum(v for k, v in t.items() if k not in ("objects", "reduction")) / e_n
-    own = (t.get("objects", 0.0) + t.get("reduction", 0.0)) / e_n
-    for e, m in enumerate(result.members):
-        runs["seed"].append(m.seed)
-        runs["n_areas"].append(len(m.areas))
-        runs["kept_areas"].append(len(m.kept))
-        area_mask = torch.zeros_like(scene.valid)
-        for a in m.kept:
-            area_mask |= a.mask(result.labels[e])
-        px = int(area_mask.sum())
-        runs["area_px"].append(px)
-        runs["area_frac"].append(px / max(scene.n_valid, 1))
-        runs["reduction_union"].append(m.reduction.reduction_union)
-        runs["reduction_crops"].append(m.reduction.reduction_crops)
-        q, te = float(result.quantization_error[e]), float(result.topographic_error[e])
-        runs["quantization_error"].append(q if q == q else None)
-        runs["topographic_error"].append(te if te == te else None)
-        runs["runtime_s"].append(per_run_s[e] if per_run_s is not None else shared + own)
-        if obj_mask is not None:
-            s = m.score
-            obj = obj_mask & scene.valid
-            runs["identified_fraction"].append(s.identified_fraction)
-            runs["identified_100"].append(s.identified_100)
-            runs["identified_95"].append(s.identified_95)
-            runs["useful_hit"].append(s.useful_hit)
-            runs["area_precision"].append(int((area_mask & obj).sum()) / px if px else 0.0)
-            p, r, f1 = _segment_f1(result.labels[e], obj)
-            runs["segment_precision"].append(p)
-            runs["segment_recall"].append(r)
-            runs["segment_f1"].append(f1)
-    return {k: v for k, v in runs.items() if v}
-
-
-def _merge_runs(parts: list[dict[str, list]]) -> dict[str, list]:
-    out: dict[str, list] = {}
-    for p in parts:
-        for k, v in p.items():
-            out.setdefault(k, []).extend(v)
-    return out
-
-
-def summarize_runs(runs: dict[str, list], x_opt: float | None) -> dict[str, Any]:
-    """The Table 1 / Table 2 numbers of one job from its per-run values."""
-    from somtorch.outputs import summary_stats as _stats
-
-    n = len(runs["seed"])
-    out: dict[str, Any] = {"runs": n, "reduction_all": _stats(runs["reduction_union"]),
-                           "runtime_s": _stats(runs["runtime_s"]), "area_frac": _stats(runs["area_frac"])}
-    if "identified_fraction" not in runs:
-        return out
-    id100, id95, useful = runs["identified_100"], runs["identified_95"], runs["useful_hit"]
-    pick = lambda key, flags: [v for v, f in zip(runs[key], flags) if f]  # noqa: E731
-    tradeoff = [f * max(0.0, min(1.0, r / x_opt)) if x_opt else 0.0
-                for f, r in zip(id95, runs["reduction_union"])]
-    out.update({
-        "identified_100": int(sum(id100)), "identified_95": int(sum(id95)), "useful_hits": int(sum(useful)),
-        "x_opt": x_opt,
-        "mean_identified_fraction": float(sum(runs["identified_fraction"]) / n),
-        # Table 2: over the runs with complete identification (the paper), and over the >= 95 % runs
-        "reduction_complete": _stats(pick("reduction_union", id100)),
-        "reduction_crops_complete": _stats(pick("reduction_crops", id100)),
-        "reduction_95": _stats(pick("reduction_union", id95)),
-        "reduction_crops_95": _stats(pick("reduction_crops", id95)),
-        "segment_f1": _stats(runs["segment_f1"]), "area_precision": _stats(runs["area_precision"]),
-        # in [0, 1]: mean over runs of [>= 95 % identified] * min(1, reduction / x_opt) (Optuna's objective)
-        "tradeoff": float(sum(tradeoff) / n),
-    })
-    return out
-
-
-def _per_object(scene, results: list) -> dict[str, Any]:
-    from somtorch.tasks.scoring import score_reduction
-
-    out = {}
-    for info in scene.object_info:
-        mask = scene.object_mask(info.id)
-        if not bool((mask & scene.valid).any()):
-            continue
-        s = [score_reduction(m.reduction, mask, scene.valid) for r in results for m in r.members]
-        out[str(info.id)] = {"name": info.name, "main": info.main, "identified_95": sum(x.identified_95 for x in s),
-                             "identified_100": sum(x.identified_100 for x in s),
-                             "mean_identified_fraction": sum(x.identified_fraction for x in s) / len(s),
-                             "x_opt": s[0].x_opt}
-    return out
-
-
 def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str, Any]:
     """Run one study job into ``out_dir`` (see the module docstring); returns its metrics."""
     import torch
@@ -273,7 +158,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
             repeats.append({**stages, "wall": wall})
             if rep == 0:
                 results, per_run_s = res, times
-        runs = _merge_runs([_run_records(scene, r, obj_mask, None if per_run_s is None else per_run_s[i:i + 1])
+        runs = merge_runs([run_records(scene, r, obj_mask, None if per_run_s is None else per_run_s[i:i + 1])
                             for i, r in enumerate(results)])
         first = results[0].members[0].score
         x_opt = first.x_opt if first is not None else None
@@ -289,7 +174,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
                        "train_stride": cfg.features.train_stride},
             "ground_found": results[0].ground is not None,
             "runs": runs, "summary": summarize_runs(runs, x_opt),
-            "per_object": _per_object(scene, results) if scene.objects is not None else {},
+            "per_object": per_object_scores(scene, results) if scene.objects is not None else {},
             "timings_s": repeats[0], "timings_repeats_s": repeats,
             "job": _job_info(),
             "env": {"somtorch": __version__, "torch": torch.__version__, "threads": torch.get_num_threads(),

@@ -53,8 +53,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
     print("|---|---|---|---|---|---|")
     for spec in args.scenes:
         members = run_pipeline(load_scene(args.data_dir / spec), cfg, metrics=False).members
-        purity = np.array([m.kept[0].extra["purity"] for m in members])
-        solid = np.array([m.kept[0].extra["solidity"] for m in members])
+        purity = np.array([m.kept[0].purity for m in members])
+        solid = np.array([m.kept[0].solidity for m in members])
         row = {"scene": spec, "runs": len(members), "low_purity": int((purity < BOUND).sum()),
                "low_solidity": int((solid < BOUND).sum()), "median_purity": float(np.median(purity)),
                "median_solidity": float(np.median(solid))}

@@ -18,33 +18,14 @@ import numpy as np
 
 from . import viz
 from .atomic import atomic_path
+from .config import OutputConfig
+from .evaluation import summary_stats
 from .disparity.scene import Scene
 from .pipeline import PipelineResult
 from .tasks.segmentation import color_map, grey_map
 from .validation import check_choice, check_positive
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class OutputConfig:
-    """Which artefacts a run writes (``member`` selects the ensemble member drawn in the pictures)."""
-
-    maps: bool = True
-    pointcloud: bool = True
-    render: bool = True
-    voxel_size: float | None = None  # in the camera's baseline unit; None = no down-sampling
-    render_backend: str = "auto"
-    checkpoint: bool = True
-    tensorboard: bool = True
-    member: int = 0
-
-    def __post_init__(self) -> None:
-        if self.voxel_size is not None:
-            check_positive("output.voxel_size", self.voxel_size)
-        check_choice("output.render_backend", self.render_backend, ("auto", "open3d", "matplotlib"))
-        if self.member < 0:
-            raise ValueError(f"output.member must be >= 0; got {self.member}")
 
 
 def _finite(v: float) -> float | None:
@@ -63,13 +44,14 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "kept_areas": [{"neurons": a.neurons, "pixels": a.pixels, "box_xyxy": list(a.box),
                             "mean_disparity": a.mean_disparity, "contrast": a.contrast,
                             "area_frac": a.area_frac,
-                            **{k: _finite(float(a.extra[k])) for k in ("purity", "solidity") if k in a.extra}}
+                            **{k: _finite(getattr(a, k)) for k in ("purity", "solidity", "confidence")}}
                            for a in m.kept],
             "kept_boxes_xyxy": [list(b) for b in m.reduction.boxes],
             "kept_valid_union": m.reduction.kept_union,
             "kept_valid_crops": m.reduction.kept_crops,
             "reduction_union": m.reduction.reduction_union,
             "reduction_crops": m.reduction.reduction_crops,
+            "no_object": m.no_object,
             "score": m.score.as_dict() if m.score is not None else None,
         })
     out: dict[str, Any] = {
@@ -100,15 +82,6 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
     if config is not None:
         out["config"] = config
     return out
-
-
-def summary_stats(values: list[float]) -> dict[str, float | int | None]:
-    """``n``, ``min``, ``mean``, ``max`` and ``median`` of a list (None for an empty one)."""
-    if not values:
-        return {"n": 0, "min": None, "mean": None, "max": None, "median": None}
-    a = np.asarray(values, dtype=np.float64)
-    return {"n": int(a.size), "min": float(a.min()), "mean": float(a.mean()), "max": float(a.max()),
-            "median": float(np.median(a))}
 
 
 def write_maps(scene: Scene, result: PipelineResult, out_dir: Path, member: int = 0) -> dict[str, np.ndarray]:

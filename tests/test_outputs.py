@@ -76,8 +76,8 @@ def test_summarize_is_json_ready_with_the_documented_keys(motorcycle, result):
         assert mem["reduction_union"] == res.reduction.reduction_union
         assert len(mem["kept_areas"]) == len(res.kept) == 1
         kept = mem["kept_areas"][0]
-        assert kept["purity"] == res.kept[0].extra["purity"] and 0 < kept["purity"] <= 1
-        assert kept["solidity"] == res.kept[0].extra["solidity"] and kept["solidity"] > 0
+        assert kept["purity"] == res.kept[0].purity and 0 < kept["purity"] <= 1
+        assert kept["solidity"] == res.kept[0].solidity and kept["solidity"] > 0
         assert mem["score"] is None
 
 

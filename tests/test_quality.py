@@ -75,16 +75,16 @@ def test_purity_and_solidity_tests_reject_sgbm_junk_on_a_computed_disparity_map(
 def test_computed_disparity_script_prints_a_row_per_scene(shared_data, capsys):
     from experiments.computed_disparity import main
 
-    rows = main(["--runs", "2", "--scenes", "kitti2015_est", "--data-dir", str(shared_data),
+    rows = main(["--runs", "2", "--scenes", "kitti_est", "--data-dir", str(shared_data),
                  "--set", "objects.min_purity=0", "--set", "som.rows=6"])
-    assert [r["scene"] for r in rows] == ["kitti2015_est"] and rows[0]["runs"] == 2
+    assert [r["scene"] for r in rows] == ["kitti_est"] and rows[0]["runs"] == 2
     assert 0 <= rows[0]["useful_hits"] <= rows[0]["identified_95"] <= 2
     per_object = rows[0]["per_object_identified_95"]
     assert sorted(per_object) == [1, 2, 3, 4] and per_object[1] == rows[0]["identified_95"]
     assert all(0 <= n <= 2 for n in per_object.values())
-    assert "| kitti2015_est | 2 |" in capsys.readouterr().out
+    assert "| kitti_est | 2 |" in capsys.readouterr().out
     with pytest.raises(ValueError, match="objects.bogus=1"):
-        main(["--runs", "1", "--scenes", "kitti2015_est", "--data-dir", str(shared_data), "--set", "objects.bogus=1"])
+        main(["--runs", "1", "--scenes", "kitti_est", "--data-dir", str(shared_data), "--set", "objects.bogus=1"])
 
 
 def test_solidity_test_rejects_ceiling_streaks_on_an_unlabelled_sgbm_scene(shared_data):
@@ -98,7 +98,7 @@ def test_solidity_test_rejects_ceiling_streaks_on_an_unlabelled_sgbm_scene(share
     for v in (0.25, 0.0):
         members = run_pipeline(scene, PipelineConfig(ensemble=20, objects=AreaConfig(min_solidity=v)),
                                metrics=False).members
-        low[v] = sum(m.kept[0].extra["solidity"] < 0.25 for m in members)
+        low[v] = sum(m.kept[0].solidity < 0.25 for m in members)
     assert low[0.25] <= 2, low
     assert low[0.0] >= 6, low
 

@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 from .._optional import optional_import
+from ..core.grid import default_sigma
 from ..validation import check_choice, check_positive, check_positive_int, check_tensor
 
 __all__ = ["MINISOM_INITS", "MINISOM_NEIGHBORHOODS", "MINISOM_ORDERS", "import_minisom", "train_minisom"]
@@ -126,7 +127,7 @@ def train_minisom(x: torch.Tensor, rows: int, cols: int, *, seeds: Sequence[int]
 
     data = np.ascontiguousarray(x.detach().cpu().double().numpy())  # (N, D) float64
     steps = iterations if iterations is not None else epochs * n
-    radius = float(sigma) if sigma is not None else max(rows, cols) / 2.0
+    radius = float(sigma) if sigma is not None else default_sigma(rows, cols)
     out = []
     for seed in seeds:
         som = minisom.MiniSom(rows, cols, d, sigma=radius, learning_rate=float(lr),

@@ -88,3 +88,8 @@ def adjacency(grid_d2: torch.Tensor, topology: str) -> torch.Tensor:
     adj = grid_d2 <= thr * thr
     adj.fill_diagonal_(False)
     return adj
+
+
+def default_sigma(rows: int, cols: int) -> float:
+    """The initial neighbourhood radius when none is given: half the longer grid side (grid units)."""
+    return max(rows, cols) / 2.0

@@ -18,11 +18,12 @@ from typing import Any
 import torch
 from torch import nn
 
+from ..config import SOMConfig, TrainConfig
 from ..validation import check_choice, check_positive, check_positive_int, check_tensor, resolve
 from . import checkpoint
 from .decay import DECAYS, DecayFn
 from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search, pairwise_sqdist
-from .grid import TOPOLOGIES, adjacency, grid_coordinates, grid_sqdist
+from .grid import TOPOLOGIES, adjacency, default_sigma, grid_coordinates, grid_sqdist
 from .init import INITS, init_pca, init_random, init_sample
 from .losses import soft_assign, som_energy
 from .metrics import quantization_error, topographic_error, umatrix
@@ -30,8 +31,8 @@ from .neighborhood import NEIGHBORHOODS, NeighborhoodFn
 from .training import Callback, Order, Schedules, run
 
 MODES = ("online", "batch", "minibatch")
+_T, _S = TrainConfig, SOMConfig  # the defaults of fit (class attributes), declared once in somtorch.config
 ORDERS = ("sequential", "random")
-DEFAULT_EPOCHS = {"online": 10, "batch": 20, "minibatch": 10}
 
 
 def _new_seed() -> int:
@@ -206,14 +207,14 @@ class SOM(nn.Module):
         return self.set_weight(torch.stack(members))
 
     # ------------------------------------------------------------------ training
-    def fit(self, x: torch.Tensor, *, mode: str = "online", epochs: int | None = None,
-            iterations: int | None = None, lr: float | torch.Tensor = 0.5,
+    def fit(self, x: torch.Tensor, *, mode: str = _T.mode, epochs: int | None = None,
+            iterations: int | None = None, lr: float | torch.Tensor = _T.lr,
             sigma: float | torch.Tensor | None = None, lr_final: float | torch.Tensor | None = None,
             sigma_final: float | torch.Tensor | None = None,
-            lr_decay: str | DecayFn | Sequence[str] = "asymptotic",
-            sigma_decay: str | DecayFn | Sequence[str] = "asymptotic",
-            neighborhood: str | NeighborhoodFn = "gaussian",
-            order: str | torch.Tensor = "random", batch_size: int = 256, init: str = "random",
+            lr_decay: str | DecayFn | Sequence[str] = _T.lr_decay,
+            sigma_decay: str | DecayFn | Sequence[str] = _T.sigma_decay,
+            neighborhood: str | NeighborhoodFn = _T.neighborhood,
+            order: str | torch.Tensor = _T.order, batch_size: int = _T.batch_size, init: str = _S.init,
             progress: bool = True, callback: Callback | None = None,
             callback_every: int | None = None) -> SOM:
         """Train the maps on ``x`` and return ``self``.
@@ -223,7 +224,9 @@ class SOM(nn.Module):
             mode: ``"online"`` (Kohonen's sequential rule, one sample per step), ``"batch"`` (batch
                 map, one step per epoch) or ``"minibatch"`` (batch-map updates on ``batch_size``
                 samples with learning rate ``lr``).
-            epochs: passes over the data (default 10 online / 20 batch / 10 minibatch).
+            epochs: passes over the data (default :class:`~somtorch.config.TrainConfig` ``epochs``).
+            The defaults of every argument are those of :class:`~somtorch.config.TrainConfig`
+            (``mode`` batch), so ``fit(x)`` trains as ``somtorch-run`` does.
             iterations: online only: number of single-sample steps (overrides ``epochs``).
             lr, sigma: initial learning rate and neighbourhood radius (grid units, default
                 max(rows, cols)/2); scalars or per-member tensors ``(E,)``. ``lr`` is unused in batch mode.
@@ -245,7 +248,7 @@ class SOM(nn.Module):
         check_choice("mode", mode, MODES)
         n = x.shape[-2]
         if sigma is None:
-            sigma = max(self.rows, self.cols) / 2.0
+            sigma = default_sigma(self.rows, self.cols)
         sigma_t = self._per_member("sigma", sigma)
         lr_t = self._per_member("lr", lr)
         lr_end = self._per_member("lr_final", lr_final) if lr_final is not None else lr_t / 100.0
@@ -257,7 +260,7 @@ class SOM(nn.Module):
         batch_size = check_positive_int("batch_size", batch_size)
         if iterations is not None and mode != "online":
             raise ValueError(f"iterations is only for mode='online'; use epochs for mode={mode!r}")
-        epochs = check_positive_int("epochs", epochs if epochs is not None else DEFAULT_EPOCHS[mode])
+        epochs = check_positive_int("epochs", epochs if epochs is not None else _T.epochs)
         if mode == "online":
             steps = check_positive_int("iterations", iterations) if iterations is not None else epochs * n
             stream = steps

@@ -22,9 +22,11 @@ from dataclasses import dataclass
 
 import torch
 
+from ..config import FeatureConfig
 from ..validation import check_choice, check_positive, check_positive_int, check_tensor
 
 NORMALIZATIONS = ("image", "minmax", "none")
+_F = FeatureConfig  # the defaults of make_features, declared once in somtorch.config
 
 
 @dataclass
@@ -79,8 +81,8 @@ class Features:
                         self.n_invalid, self.stride * stride, sub)
 
 
-def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: str = "image",
-                  d_weight: float = 1.0, dtype: torch.dtype = torch.float32) -> Features:
+def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: str = _F.normalize,
+                  d_weight: float = _F.d_weight, dtype: torch.dtype = torch.float32) -> Features:
     """Turn the valid pixels of a disparity map into scaled (y, x, d) vectors, row-major order.
 
     Args:

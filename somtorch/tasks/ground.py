@@ -15,45 +15,8 @@ from dataclasses import dataclass
 
 import torch
 
-from ..validation import check_positive, check_positive_int, check_tensor
-
-
-@dataclass
-class GroundConfig:
-    """Parameters of the ground-plane search.
-
-    Attributes:
-        enabled: look for a ground plane at all.
-        tol_frac: inlier band half-width as a fraction of the map's disparity range (1st–99th
-            percentile) …
-        tol_px: … but at least this many px.
-        min_inlier_frac: a plane needs this share of the valid pixels.
-        min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
-            of the disparity range (a fronto-parallel wall has b ≈ 0).
-        max_top_frac: a plane covering more than this share of the valid pixels of the top third
-            of the image is not ground (a wall or a slanted object).
-        iterations: RANSAC hypotheses.
-        sample: pixels drawn for RANSAC.
-        seed: RANSAC seed (the result does not depend on the SOM seed).
-    """
-
-    enabled: bool = True
-    tol_frac: float = 0.02
-    tol_px: float = 0.5
-    min_inlier_frac: float = 0.08
-    min_slope_frac: float = 0.25
-    max_top_frac: float = 0.15
-    iterations: int = 200
-    sample: int = 5000
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        check_positive("tol_frac", self.tol_frac, allow_zero=True)
-        check_positive("tol_px", self.tol_px, allow_zero=True)
-        check_positive("min_inlier_frac", self.min_inlier_frac)
-        check_positive("min_slope_frac", self.min_slope_frac, allow_zero=True)
-        check_positive_int("iterations", self.iterations)
-        check_positive_int("sample", self.sample)
+from ..config import GroundConfig
+from ..validation import check_tensor
 
 
 @dataclass

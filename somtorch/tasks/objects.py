@@ -29,139 +29,12 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ..validation import check_choice, check_positive, check_positive_int, check_tensor
+from ..config import AreaConfig
+from ..validation import check_tensor
 
 SELECTIONS = ("nearest", "salient", "all")
 LINKS = ("grid", "image", "both")
 SPREADS = ("range", "robust")
-
-
-@dataclass
-class AreaConfig:
-    """Parameters of object-area recognition (see the module docstring).
-
-    The defaults are the ``robust`` preset (segments merge across image-space boundaries, robust
-    spread, salient selection); ``conf/objects/paper.yaml`` holds the paper's literal rule
-    (``link="grid"``, ``spread="range"``, ``similarity=0.1``, ``select="nearest"``).
-
-    Attributes:
-        similarity: two linked neurons are similar if their reference disparities differ by
-            less than ``similarity × spread`` of the map.
-        connectivity: 4 (grid rows/columns only) or 8 (diagonals too) for rectangular maps.
-        link: which neurons may join: ``"grid"`` (adjacent on the SOM grid, the paper's rule),
-            ``"image"`` (their segments share a boundary in the image) or ``"both"``.
-        spread: ``"range"`` (d_max − d_min of the segmented pixels, the paper's reading) or
-            ``"robust"`` (5th–95th percentile, insensitive to the outliers of computed maps).
-        min_boundary: with ``link="image"``/``"both"``, two segments touch if their common boundary
-            is at least this fraction of the shorter of their two perimeters.
-        select: ``"nearest"``, ``"salient"`` or ``"all"``.
-        merge: join to each kept area the image-adjacent segments whose mean disparity is within
-            ``merge ×`` its contrast of its own (other parts of the same object at another depth, see
-            :func:`~somtorch.tasks.refine.merge_adjacent`); 0 = off. Measured (100 runs, OR, useful hits Motorcycle / KITTI /
-            FlyingThings3D / ETH3D / OAK-D toy): off 87/91/85/93/85, 0.5 99/91/87/93/91, 0.75
-            99/91/100/93/99, 1.0 93/91/100/91/100.
-        min_purity: a kept area's (joined, refined) box must be at least this share its own pixels,
-            of the valid pixels inside it; otherwise the next candidate in rank order is tried (at most
-            ``purity_candidates`` in all; if none passes, the best-ranked one is kept). Rejects areas
-            made of scattered SGBM speckles and border junk, whose box is mostly other segments.
-            0 = off. Measured (100 runs, OR, useful hits): the 8 shared scenes 483 / 488 / 479 / 449
-            at 0.15 / 0.25 / 0.35 / 0.5 (0 = 483); four scenes re-computed with our SGBM (KITTI's
-            estimate, Motorcycle, ETH3D, FlyingThings3D pairs) 168 at 0, 228 / **249** / 196 at
-            0.15 / 0.25 / 0.35 (ETH3D 8 → 87).
-        min_solidity: a kept area's segments must also be solid: the share of their pixels that
-            survives a morphological opening with a square of ``solidity_size ×`` the shorter image
-            side must be at least ``min_solidity ×`` the same share for all the segmented pixels (see
-            :func:`~somtorch.tasks.refine.solidity`); otherwise the next candidate is tried, as for
-            the purity. Rejects the thin horizontal streaks and scattered mismatches SGBM leaves
-            on textureless ceilings and walls, which can be the nearest, most contrasted "area" of a
-            computed map. 0 = off. Measured (100 runs, OR, check off): the relative solidity of
-            every kept area that is a useful hit on the 8 shared scenes is 0.43–1.74 (ETH3D's
-            slatted chair lowest; KITTI's sparse ground truth above 1 thanks to the
-            normalisation); the picks below 0.25 on the OAK-D desk and corridor are ceiling
-            streaks and scattered speckles (checked by eye, 0.00–0.23);
-            with 0.25 the OAK-D scenes without masks keep junk in 3 / 0 / 0 of 100 runs (desk /
-            corridor / kid_bedroom) instead of 52 / 31 / 3, and the scores of the masked scenes
-            (shared and computed-disparity) are unchanged (488 / 249 useful hits at 0, 0.15,
-            0.25 and 0.35).
-        solidity_size: side of the opening's square as a fraction of the shorter image side.
-        purity_candidates: how many ranked candidates the purity and solidity tests may try.
-        grow: replace each kept area by the image-connected region around it that is nearer than
-            half-way between the area and its surroundings (``mean_disparity − contrast/2``): an
-            object split over several areas is recovered whole, background pixels inside the
-            area's segments are dropped.
-        grow_stride: the growing and the box refinement work on every ``grow_stride``-th pixel.
-        box_coverage: a kept area's box covers its largest image-connected pieces up to this share
-            of its pixels, so stray fragments of its segments far from the object do not stretch the
-            box (1.0 = the box of all the segments' pixels, the paper's reading).
-        box_quantile: the box spans the ``box_quantile`` … ``1 − box_quantile`` quantiles of the kept
-            pixels' coordinates, so a thin protrusion (an antenna, an SGBM streak: ~0.1 % of the
-            pixels) does not move an edge; 0 = the full extent. See :func:`~somtorch.tasks.refine.refine_box`.
-        ground_clutter: pieces of a kept area lying on the ground plane (more than half of their
-            pixels within ``ground_clutter ×`` the plane's inlier band) are left out of its box:
-            streaks of a computed floor that share the object's disparity. 0 = off; no effect
-            without a ground plane. The default 3 measured (100 runs, OR) on the OAK-D toy: useful
-            hits 0 → 48 at 2×–5× the band (2×: 0), no change on the other scenes.
-        size_power: salient: areas are ranked by ``contrast × area_frac ** size_power`` (0 = by
-            contrast alone; 0.5 favours large salient objects over small salient fragments). The
-            default 0.25 came from the 100-run study over the shared scenes (OR, useful hits of
-            Motorcycle + KITTI + FlyingThings3D + ETH3D: 247 at 0, 297 at 0.25, 293 at 0.35, 286 at
-            0.5): a small contrasty fragment or SGBM streak no longer beats a whole object.
-        max_areas: how many areas are kept at most.
-        min_contrast: salient: minimum contrast, as a fraction of the disparity range.
-        max_area_frac, min_area_frac: size limits as fractions of the valid pixels.
-    """
-
-    similarity: float = 0.05
-    connectivity: int = 4
-    link: str = "image"
-    spread: str = "robust"
-    min_boundary: float = 0.1
-    size_power: float = 0.25
-    grow: bool = False
-    grow_stride: int = 2
-    box_coverage: float = 0.99
-    box_quantile: float = 0.001
-    ground_clutter: float = 3.0
-    merge: float = 0.75
-    min_purity: float = 0.25
-    min_solidity: float = 0.25
-    solidity_size: float = 0.02
-    purity_candidates: int = 5
-    select: str = "salient"
-    max_areas: int = 1
-    min_contrast: float = 0.02
-    max_area_frac: float = 0.5
-    min_area_frac: float = 0.01
-
-    def __post_init__(self) -> None:
-        check_positive("similarity", self.similarity)
-        if self.connectivity not in (4, 8):
-            raise ValueError(f"connectivity must be 4 or 8; got {self.connectivity!r}")
-        check_choice("select", self.select, SELECTIONS)
-        check_choice("link", self.link, LINKS)
-        check_choice("spread", self.spread, SPREADS)
-        check_positive("min_boundary", self.min_boundary, allow_zero=True)
-        check_positive_int("grow_stride", self.grow_stride)
-        if not 0 < self.box_coverage <= 1:
-            raise ValueError(f"box_coverage must be in (0, 1]; got {self.box_coverage}")
-        if not 0 <= self.box_quantile < 0.5:
-            raise ValueError(f"box_quantile must be in [0, 0.5); got {self.box_quantile}")
-        check_positive("ground_clutter", self.ground_clutter, allow_zero=True)
-        check_positive("merge", self.merge, allow_zero=True)
-        if not 0 <= self.min_purity <= 1:
-            raise ValueError(f"min_purity must be in [0, 1]; got {self.min_purity}")
-        if not 0 <= self.min_solidity <= 1:
-            raise ValueError(f"min_solidity must be in [0, 1]; got {self.min_solidity}")
-        if not 0 < self.solidity_size <= 0.5:
-            raise ValueError(f"solidity_size must be in (0, 0.5]; got {self.solidity_size}")
-        check_positive_int("purity_candidates", self.purity_candidates)
-        check_positive_int("max_areas", self.max_areas)
-        check_positive("min_contrast", self.min_contrast, allow_zero=True)
-        check_positive("max_area_frac", self.max_area_frac)
-        check_positive("min_area_frac", self.min_area_frac, allow_zero=True)
-        if self.max_area_frac > 1 or self.min_area_frac >= self.max_area_frac:
-            raise ValueError(f"need 0 <= min_area_frac < max_area_frac <= 1; got {self.min_area_frac}, "
-                             f"{self.max_area_frac}")
 
 
 @dataclass
@@ -205,7 +78,13 @@ class ObjectArea:
     contrast: float
     area_frac: float
     rank: int = -1
-    extra: dict = field(default_factory=dict)
+    segment_box: tuple[int, int, int, int] | None = None  # box of all its segments' pixels, before refinement
+    merged_segments: int = 0  # segments joined by merge_adjacent
+    ground_clutter_pieces: int = 0  # pieces left out of the box as ground clutter
+    grow_threshold: float | None = None  # disparity threshold of grow_area
+    purity: float | None = None  # share of the box's valid pixels that are the area's own
+    solidity: float | None = None  # opened share of its pixels relative to the map's
+    confidence: float | None = None  # rank score relative to the best candidate's (1 = best)
 
     def mask(self, labels: torch.Tensor) -> torch.Tensor:
         """The area's pixels: the union of its neurons' segments. ``labels`` ``(H, W)`` → ``(H, W)`` bool."""

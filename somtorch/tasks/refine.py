@@ -19,11 +19,14 @@ from dataclasses import replace
 
 import torch
 
-from .objects import AreaConfig, NeuronStats, ObjectArea, select_areas
+from ..config import AreaConfig
+from .objects import NeuronStats, ObjectArea
+
+_D = AreaConfig  # the defaults of the helpers below are those of the config
 
 
-def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float = 0.75, min_boundary: float = 0.1,
-                   max_area_frac: float = 1.0, exclude: torch.Tensor | None = None) -> list[ObjectArea]:
+def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float = _D.merge,
+                   min_boundary: float = _D.min_boundary, max_area_frac: float = 1.0, exclude: torch.Tensor | None = None) -> list[ObjectArea]:
     """Join to each kept area the segments that are other parts of the same object (``AreaConfig.merge``).
 
     A segment (one neuron's pixels) joins if it touches the growing group in the image (their common
@@ -73,15 +76,15 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
         box = (int(b[:, 0].min()), int(b[:, 1].min()), int(b[:, 2].max()), int(b[:, 3].max()))
         n = float(cnt.sum())
         mean = float((torch.nan_to_num(stats.mean_d[idx]) * cnt).sum() / n)
-        out.append(ObjectArea(idx.tolist(), int(n), box, mean, a.contrast, n / total, a.rank,
-                              {**a.extra, "merged_segments": added}))
+        out.append(replace(a, neurons=idx.tolist(), pixels=int(n), box=box, mean_disparity=mean,
+                           area_frac=n / total, merged_segments=added))
     for i, a in enumerate(out):
         a.rank = i
     return out
 
 
 def grow_area(area: ObjectArea, labels: torch.Tensor, disparity: torch.Tensor, usable: torch.Tensor,
-              *, stride: int = 2) -> ObjectArea:
+              *, stride: int = _D.grow_stride) -> ObjectArea:
     """The image-connected region of pixels nearer than ``mean_disparity − contrast/2`` that touches
     the area's pixels (see ``AreaConfig.grow``). Returns a new :class:`ObjectArea` with the grown box
     and pixel count (neurons, disparity and contrast unchanged).
@@ -110,12 +113,11 @@ def grow_area(area: ObjectArea, labels: torch.Tensor, disparity: torch.Tensor, u
     h, w = labels.shape
     box = (int(xs.min()) * s, int(ys.min()) * s, min(w - 1, int(xs.max()) * s + s - 1),
            min(h - 1, int(ys.max()) * s + s - 1))
-    return ObjectArea(area.neurons, int(region.sum()) * s * s, box, area.mean_disparity, area.contrast,
-                      area.area_frac, area.rank, {**area.extra, "grown": True, "grow_threshold": thr})
+    return replace(area, pixels=int(region.sum()) * s * s, box=box, segment_box=area.box, grow_threshold=thr)
 
 
-def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = 0.99, quantile: float = 0.0,
-               stride: int = 2, ground_residual: torch.Tensor | None = None,
+def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.box_coverage,
+               quantile: float = _D.box_quantile, stride: int = _D.grow_stride, ground_residual: torch.Tensor | None = None,
                clutter_band: float = 0.0) -> ObjectArea:
     """The box of the object inside a kept area, without the parts of its segments that are not it.
 
@@ -170,9 +172,7 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = 0.99
     box = (int(x0) * s, int(y0) * s, min(w - 1, int(x1) * s + s - 1), min(h - 1, int(y1) * s + s - 1))
     # never larger than the box of all the area's pixels (stride rounding)
     box = (max(area.box[0], box[0]), max(area.box[1], box[1]), min(area.box[2], box[2]), min(area.box[3], box[3]))
-    return ObjectArea(area.neurons, area.pixels, box, area.mean_disparity, area.contrast, area.area_frac,
-                      area.rank, {**area.extra, "segment_box": area.box, "box_coverage": coverage,
-                                  "box_quantile": quantile, "ground_clutter_pieces": dropped})
+    return replace(area, box=box, segment_box=area.box, ground_clutter_pieces=dropped)
 
 
 def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Tensor) -> float:
@@ -189,7 +189,7 @@ def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Ten
     return own / max(n_valid, 1)
 
 
-def solidity(mask: torch.Tensor, *, size: float = 0.02, stride: int = 2) -> float:
+def solidity(mask: torch.Tensor, *, size: float = _D.solidity_size, stride: int = _D.grow_stride) -> float:
     """Share of the pixels of ``mask`` that survive a morphological opening with a square of side
     ``size ×`` the shorter image side (on every ``stride``-th pixel; the nearest odd number of
     samples, at least 3): about 1 for a solid region, near 0 for scattered speckles and 1–2 px
@@ -222,64 +222,3 @@ def map_solidity(labels: torch.Tensor, cfg: AreaConfig) -> float:
     """:func:`solidity` of all the segmented pixels (``labels >= 0``), the reference of
     ``cfg.min_solidity``; the same for every member of an ensemble (they segment the same pixels)."""
     return max(solidity(labels >= 0, size=cfg.solidity_size, stride=cfg.grow_stride), 1e-9)
-
-
-def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig, *,
-               valid_integral: torch.Tensor, ground_residual: torch.Tensor | None = None,
-               clutter_band: float = 0.0, disparity: torch.Tensor | None = None,
-               usable: torch.Tensor | None = None, segmented_solidity: float | None = None) -> list[ObjectArea]:
-    """Step 1c after the areas are found: select, join, refine (or grow) and check the purity.
-
-    Candidates are taken in rank order (:func:`select_areas`); each is joined with its adjacent
-    segments (:func:`merge_adjacent`, never with segments of an area kept before it), its box refined
-    (:func:`refine_box`) or grown (:func:`grow_area`, needs ``disparity`` and ``usable``), and kept if
-    its :func:`box_purity` reaches ``cfg.min_purity`` and its segments' :func:`solidity` reaches
-    ``cfg.min_solidity ×`` the solidity of all the segmented pixels (so a sparse map, whose valid
-    pixels are themselves scattered, is not held to a dense map's standard), until
-    ``cfg.max_areas`` are kept or ``cfg.max_areas + cfg.purity_candidates − 1`` candidates were
-    tried. If none passed, the best-ranked candidate is kept anyway. Each kept area has
-    ``extra["purity"]`` and ``extra["solidity"]`` (relative to the map's), whether checked or not.
-    ``segmented_solidity``: :func:`map_solidity` if already known (computed here otherwise).
-
-    Shape:
-        ``labels`` ``(H, W)``; ``valid_integral`` ``(H+1, W+1)``; ``ground_residual``, ``disparity``,
-        ``usable`` ``(H, W)``.
-    """
-    checks = cfg.min_purity > 0 or cfg.min_solidity > 0
-    tries = cfg.max_areas + (cfg.purity_candidates - 1 if checks else 0)
-    ranked = select_areas(areas, stats, replace(cfg, max_areas=tries))
-    taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
-    kept, first = [], None
-    ref = segmented_solidity if segmented_solidity is not None else map_solidity(labels, cfg)
-    lab_s = labels[::cfg.grow_stride, ::cfg.grow_stride]  # as in the box refinement
-    square = _square(labels.shape, cfg.solidity_size, cfg.grow_stride)
-    for cand in ranked:
-        if bool(taken[torch.tensor(cand.neurons)].any()):
-            continue
-        joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
-                                max_area_frac=cfg.max_area_frac, exclude=taken)[0]
-        if cfg.grow:
-            if disparity is None or usable is None:
-                raise ValueError("kept_areas: grow=True needs disparity and usable")
-            done = grow_area(joined, labels, disparity, usable, stride=cfg.grow_stride)
-        else:
-            done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
-                              stride=cfg.grow_stride, ground_residual=ground_residual, clutter_band=clutter_band)
-        purity = box_purity(done, labels, valid_integral)
-        extra = {**done.extra, "purity": purity}
-        own = torch.isin(lab_s, torch.tensor(done.neurons, dtype=labels.dtype))
-        extra["solidity"] = _opened_share(own, square) / ref
-        solid_ok = extra["solidity"] >= cfg.min_solidity
-        done = replace(done, extra=extra)
-        if first is None:
-            first = done
-        if purity >= cfg.min_purity and solid_ok:
-            kept.append(done)
-            taken[torch.tensor(done.neurons)] = True
-            if len(kept) == cfg.max_areas:
-                break
-    if not kept and first is not None:
-        kept = [first]
-    for i, a in enumerate(kept):
-        a.rank = i
-    return kept

@@ -31,7 +31,7 @@ def test_invalid_negative_and_nonfinite_pixels_are_dropped_and_counted():
                       [9.0, 10.0, 11.0, -INF]])
     valid = torch.ones(3, 4, dtype=torch.bool)
     valid[2, 1] = False  # a finite, positive value the mask rejects
-    f = make_features(d, valid, normalize="none")
+    f = make_features(d, valid, normalize="none", d_weight=1.0)
     expected = [(y, x) for y in range(3) for x in range(4)
                 if valid[y, x] and math.isfinite(d[y, x]) and d[y, x] >= 0]
     assert f.pixels.tolist() == [list(p) for p in expected]  # row-major, exactly the usable pixels
@@ -44,7 +44,7 @@ def test_invalid_negative_and_nonfinite_pixels_are_dropped_and_counted():
 
 def test_zero_disparity_is_usable():
     d = torch.tensor([[0.0, 2.0]])
-    f = make_features(d, torch.ones(1, 2, dtype=torch.bool), normalize="none")
+    f = make_features(d, torch.ones(1, 2, dtype=torch.bool), normalize="none", d_weight=1.0)
     assert len(f) == 2 and f.n_invalid == 0
 
 

@@ -7,8 +7,9 @@ import torch
 
 from somtorch.disparity.filters import remove_speckles
 from somtorch.tasks.objects import AreaConfig, ObjectArea, find_object_areas, neuron_stats, select_areas
+from somtorch.tasks.detect import MapContext, find_objects, kept_areas
+from somtorch.tasks.refine import box_purity, grow_area, merge_adjacent, refine_box, solidity
 from somtorch.tasks.reduction import valid_integral
-from somtorch.tasks.refine import box_purity, grow_area, kept_areas, merge_adjacent, refine_box, map_solidity, solidity
 
 
 def _area(neurons, box, mean_d=50.0, contrast=40.0):
@@ -20,11 +21,11 @@ def test_refine_box_drops_a_stray_fragment_but_keeps_the_body():
     labels[20:60, 30:70] = 0  # the object's segment: a 40x40 block ...
     labels[95:97, 2:4] = 0  # ... plus a 2x2 stray fragment far away (0.25 % of its pixels)
     area = _area([0], (2, 20, 69, 96))
-    tight = refine_box(area, labels, coverage=0.99, stride=1)
+    tight = refine_box(area, labels, coverage=0.99, quantile=0.0, stride=1)
     assert tight.box == (30, 20, 69, 59)
-    assert tight.extra["segment_box"] == (2, 20, 69, 96)
+    assert tight.segment_box == (2, 20, 69, 96)
     # coverage 1.0 keeps every piece: the paper's box of all segment pixels
-    assert refine_box(area, labels, coverage=1.0, stride=1) is area
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1) is area
 
 
 def test_refine_box_quantile_ignores_a_thin_protrusion():
@@ -45,16 +46,16 @@ def test_refine_box_leaves_out_pieces_flat_on_the_ground_plane():
     labels[100:110, 100:150] = 0  # a floor streak with the object's disparity, on the plane
     residual[100:110, 100:150] = 0.3
     area = _area([0], (40, 30, 149, 109))
-    kept = refine_box(area, labels, coverage=1.0, stride=1, ground_residual=residual, clutter_band=1.0)
+    kept = refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, ground_residual=residual, clutter_band=1.0)
     assert kept.box == (40, 30, 79, 69)
-    assert kept.extra["ground_clutter_pieces"] == 1
+    assert kept.ground_clutter_pieces == 1
     # a band narrower than the streak's residual keeps it; no plane keeps it
-    assert refine_box(area, labels, coverage=1.0, stride=1, ground_residual=residual, clutter_band=0.2) \
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, ground_residual=residual, clutter_band=0.2) \
         .box == area.box
-    assert refine_box(area, labels, coverage=1.0, stride=1, ground_residual=None, clutter_band=1.0) is area
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, ground_residual=None, clutter_band=1.0) is area
     # an area lying wholly on the plane is left as it is (nothing would remain)
     flat = torch.full((120, 160), 0.1)
-    assert refine_box(area, labels, coverage=1.0, stride=1, ground_residual=flat, clutter_band=1.0).box == area.box
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, ground_residual=flat, clutter_band=1.0).box == area.box
 
 
 def _stats_of(labels, disp):
@@ -79,7 +80,7 @@ def test_merge_adjacent_joins_a_touching_segment_of_similar_depth_only():
     assert merged[0].box == (10, 10, 29, 44)
     assert merged[0].pixels == 400 + 300
     assert abs(merged[0].mean_disparity - (50 * 400 + 56 * 300) / 700) < 1e-9
-    assert merged[0].extra["merged_segments"] == 1
+    assert merged[0].merged_segments == 1
     # ratio 0 is off; a ratio too small for the 6 px step joins nothing
     assert merge_adjacent(kept, stats, ratio=0.0) is kept
     assert merge_adjacent(kept, stats, ratio=0.1)[0] is kept[0]
@@ -109,7 +110,7 @@ def test_grow_area_recovers_the_whole_near_object_and_stops_at_the_background():
     grown = grow_area(_area([0], (20, 10, 34, 24)), labels, disp, usable, stride=1)
     assert grown.box == (20, 10, 49, 39)
     assert grown.pixels == 30 * 30
-    assert grown.extra["grow_threshold"] == 30.0  # mean − contrast / 2
+    assert grown.grow_threshold == 30.0  # mean − contrast / 2
     # pixels that may not join (e.g. the ground plane) stop the growth
     usable[:, 35:] = False
     assert grow_area(_area([0], (20, 10, 34, 24)), labels, disp, usable, stride=1).box == (20, 10, 34, 39)
@@ -159,20 +160,55 @@ def _speckles_and_object():
     return labels, disp, stats, areas
 
 
+def _ctx(labels, disp, valid=None, cfg=None):
+    valid = torch.ones_like(labels, dtype=torch.bool) if valid is None else valid
+    return MapContext.build(disp, valid, labels >= 0, None, cfg or AreaConfig())
+
+
 def test_kept_areas_skips_a_speckle_area_whose_box_is_mostly_other_pixels():
-    labels, _, stats, areas = _speckles_and_object()
-    ii = valid_integral(torch.ones_like(labels, dtype=torch.bool))
+    labels, disp, stats, areas = _speckles_and_object()
+    ctx = _ctx(labels, disp)
     ranked = select_areas(areas, stats, AreaConfig(max_areas=3))
     assert ranked[0].neurons == [2]  # the speckles rank first by contrast x size
-    kept = kept_areas(areas, stats, labels, AreaConfig(), valid_integral=ii)
+    kept = kept_areas(areas, stats, labels, AreaConfig(), ctx)
     assert [a.neurons for a in kept] == [[1]]
-    assert kept[0].box == (10, 20, 29, 39) and kept[0].extra["purity"] == 1.0
+    assert kept[0].box == (10, 20, 29, 39) and kept[0].purity == 1.0
+    assert 0 < kept[0].confidence < 1  # ranked below the speckles
     # without the test (min_purity 0, the paper's behaviour) the speckles are kept
-    off = kept_areas(areas, stats, labels, AreaConfig(min_purity=0.0, min_solidity=0.0), valid_integral=ii)
-    assert [a.neurons for a in off] == [[2]] and off[0].extra["purity"] < 0.05
-    # a single candidate allowed: nothing passes, so the best-ranked one is kept anyway
-    one = kept_areas(areas, stats, labels, AreaConfig(purity_candidates=1), valid_integral=ii)
-    assert [a.neurons for a in one] == [[2]]
+    off = kept_areas(areas, stats, labels, AreaConfig(min_purity=0.0, min_solidity=0.0), ctx)
+    assert [a.neurons for a in off] == [[2]] and off[0].purity < 0.05 and off[0].confidence == 1.0
+    # a single candidate allowed: nothing passes, so the best-ranked one is kept anyway ...
+    cfg = AreaConfig(purity_candidates=1, fail_safe=False)
+    assert [a.neurons for a in kept_areas(areas, stats, labels, cfg, ctx)] == [[2]]
+    # ... or, fail-safe, nothing, and find_objects keeps the whole map and flags it
+    cfg = AreaConfig(purity_candidates=1, fail_safe=True)
+    assert kept_areas(areas, stats, labels, cfg, ctx) == []
+    found = find_objects(labels, torch.tensor([10.0, 40.0, 90.0]), None, ctx, cfg)
+    assert found.no_object and len(found.kept) == 1
+    assert found.kept[0].box == (0, 0, labels.shape[1] - 1, labels.shape[0] - 1) and found.kept[0].confidence == 0.0
+    # when something passes, find_objects is kept_areas with the statistics computed for it
+    found = find_objects(labels, torch.tensor([10.0, 40.0, 90.0]), None, ctx, AreaConfig())
+    assert not found.no_object and [(a.neurons, a.box) for a in found.kept] == [(a.neurons, a.box) for a in kept]
+
+
+def test_kept_areas_keeps_further_areas_by_their_score_relative_to_the_best():
+    # two compact objects of similar contrast and size: both kept with max_areas=2 and a low ratio
+    h, w = 120, 160
+    disp = torch.full((h, w), 10.0)
+    labels = torch.zeros(h, w, dtype=torch.long)
+    labels[20:60, 10:50], disp[20:60, 10:50] = 1, 40.0
+    labels[60:100, 100:140], disp[60:100, 100:140] = 2, 38.0
+    stats = neuron_stats(labels, disp, 3)
+    areas = find_object_areas(torch.tensor([10.0, 40.0, 38.0]), None, stats, AreaConfig())
+    ctx = _ctx(labels, disp)
+    one = kept_areas(areas, stats, labels, AreaConfig(), ctx)
+    assert [a.neurons for a in one] == [[1]]
+    two = kept_areas(areas, stats, labels, AreaConfig(max_areas=2, keep_ratio=0.5), ctx)
+    assert [a.neurons for a in two] == [[1], [2]] and [a.rank for a in two] == [0, 1]
+    assert two[0].confidence == 1.0 and 0.5 <= two[1].confidence < 1.0
+    # a ratio above the second's relative score keeps one
+    strict = kept_areas(areas, stats, labels, AreaConfig(max_areas=2, keep_ratio=0.99), ctx)
+    assert [a.neurons for a in strict] == [[1]]
 
 
 def test_solidity_is_one_for_a_solid_region_and_zero_for_streaks_and_speckles():
@@ -214,23 +250,19 @@ def _streaks_and_object():
 
 def test_kept_areas_skips_thin_streaks_by_their_solidity():
     labels, valid, stats, areas = _streaks_and_object()
-    ii = valid_integral(valid)
+    disp = torch.where(labels == 2, 90.0, torch.where(labels == 1, 40.0, 10.0))
+    ctx = _ctx(labels, disp, valid)
     ranked = select_areas(areas, stats, AreaConfig(max_areas=3))
     assert ranked[0].neurons == [2]  # the streaks rank first
-    kept = kept_areas(areas, stats, labels, AreaConfig(), valid_integral=ii)
-    assert [a.neurons for a in kept] == [[1]] and kept[0].extra["solidity"] > 0.9
-    # the map's solidity handed in (as the pipeline does once for all members) gives the same result
-    shared = kept_areas(areas, stats, labels, AreaConfig(), valid_integral=ii,
-                        segmented_solidity=map_solidity(labels, AreaConfig()))
-    assert [(a.neurons, a.box, a.extra) for a in shared] == [(a.neurons, a.box, a.extra) for a in kept]
+    kept = kept_areas(areas, stats, labels, AreaConfig(), ctx)
+    assert [a.neurons for a in kept] == [[1]] and kept[0].solidity > 0.9
     # the purity test alone does not catch them: their box holds no other valid pixel
-    off = kept_areas(areas, stats, labels, AreaConfig(min_solidity=0.0), valid_integral=ii)
+    off = kept_areas(areas, stats, labels, AreaConfig(min_solidity=0.0), ctx)
     assert [a.neurons for a in off] == [[2]]
-    assert off[0].extra["purity"] == 1.0 and off[0].extra["solidity"] == 0.0
+    assert off[0].purity == 1.0 and off[0].solidity == 0.0
 
 
-def test_kept_areas_grow_needs_the_disparity():
-    labels, _, stats, areas = _speckles_and_object()
-    ii = valid_integral(torch.ones_like(labels, dtype=torch.bool))
-    with pytest.raises(ValueError, match="grow=True needs disparity"):
-        kept_areas(areas, stats, labels, AreaConfig(grow=True), valid_integral=ii)
+def test_kept_areas_grow_uses_the_context_disparity():
+    labels, disp, stats, areas = _speckles_and_object()
+    kept = kept_areas(areas, stats, labels, AreaConfig(grow=True), _ctx(labels, disp))
+    assert kept and kept[0].grow_threshold is not None

@@ -1,0 +1,203 @@
+"""``python -m experiments.validate``: leave-one-scene-out validation of the tuned constants.
+
+Every development scene (``conf/scene_lists/dev.yaml``) is scored with the current defaults and with
+each value of ``grid`` (one constant changed at a time). Then, for each scene in turn, every
+constant's value is chosen on the *other* scenes (the value with the most useful hits there; the
+default wins ties) and the combination is scored on the left-out scene. The report puts three
+figures side by side, per scene and in total:
+
+* **default** — the configuration as composed (no tuning);
+* **in-sample** — the constants chosen on all scenes, scored on the same scenes (fitted);
+* **left-out** — the constants chosen without the scene, scored on it (what a new scene can expect).
+
+A change to the object rule is adopted only if it raises the left-out total. Segmentations are
+computed once per scene and upstream setting (features, ground, SOM, training), so a grid of
+object-step constants costs one object step per value.
+
+    python -m experiments.validate                               # the grid of conf/validate.yaml
+    python -m experiments.validate ensemble=10 'scenes=[kitti,oakd_toy]'
+    python -m experiments.validate '+grid={objects.merge: [0.5, 1.0]}'
+
+Writes ``validate.json`` (every per-scene, per-candidate figure and the choices of every fold)
+and ``validate.md`` into the Hydra run folder.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Optional
+
+import hydra
+from hydra.core.config_store import ConfigStore
+from hydra.core.hydra_config import HydraConfig
+from hydra.utils import to_absolute_path
+from omegaconf import DictConfig, OmegaConf
+
+from experiments.schema import RunConfig, register
+
+CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+log = logging.getLogger("somtorch.validate")
+UPSTREAM = ("features", "ground", "som", "train", "baseline", "method", "ensemble", "seed")
+
+
+@dataclass
+class ValidateConfig(RunConfig):
+    """The pipeline config plus the scenes (None = all of ``conf/scene_lists/dev.yaml``) and the grid
+    (``"group.field"`` → values tried instead of the default)."""
+
+    scenes: Optional[list[str]] = None
+    grid: dict[str, list[Any]] = field(default_factory=dict)
+
+
+def _key(overrides: dict[str, Any]) -> str:
+    return ",".join(f"{k}={overrides[k]}" for k in sorted(overrides)) or "default"
+
+
+class SceneCache:
+    """One development scene: its segmentations per upstream setting, scores per candidate."""
+
+    def __init__(self, spec: Any, scene: Any, base: Any) -> None:
+        self.spec, self.scene, self.base = spec, scene, base
+        self._seg: dict[str, Any] = {}
+        self.scores: dict[str, dict[str, Any]] = {}
+
+    def score(self, overrides: dict[str, Any]) -> dict[str, Any]:
+        from somtorch.config import with_overrides
+        from somtorch.evaluation import all_objects, ground_object_share
+        from somtorch.pipeline import detect, prepare
+        from somtorch.segmenters import run_segmenter
+
+        key = _key(overrides)
+        if key in self.scores:
+            return self.scores[key]
+        cfg = with_overrides(self.base, overrides)
+        up = _key({k: v for k, v in overrides.items() if k.split(".")[0] in UPSTREAM})
+        if up not in self._seg:
+            valid, ground, usable, feats, train = prepare(self.scene, cfg)
+            self._seg[up] = (ground, run_segmenter(feats, train, self.scene, usable, cfg))
+        ground, seg = self._seg[up]
+        members = detect(self.scene, seg, ground, cfg)
+        target = all_objects(self.scene)
+        s = [m.score for m in members]
+        self.scores[key] = {
+            "runs": len(s), "useful_hits": sum(x.useful_hit for x in s),
+            "identified_95": sum(x.identified_95 for x in s),
+            "all_objects_hits": sum(target.hit(m.reduction) for m in members),
+            "no_object": sum(m.no_object for m in members),
+            "mean_reduction": sum(x.reduction_union for x in s) / len(s), "x_opt": s[0].x_opt,
+            "ground_object_frac": ground_object_share(ground, self.scene),
+        }
+        return self.scores[key]
+
+
+def choose(caches: list[SceneCache], grid: dict[str, list[Any]], defaults: dict[str, Any]) -> dict[str, Any]:
+    """Each constant's value with the most useful hits (then all-objects hits) summed over ``caches``,
+    the others at their default; the default wins ties. Returns only the changed constants."""
+    picked = {}
+    for k, values in grid.items():
+        def total(v: Any) -> tuple[int, int]:
+            ov = {} if v == defaults[k] else {k: v}
+            rows = [c.score(ov) for c in caches]
+            return sum(r["useful_hits"] for r in rows), sum(r["all_objects_hits"] for r in rows)
+        best_v, best = defaults[k], total(defaults[k])
+        for v in values:
+            t = total(v)
+            if t > best:
+                best_v, best = v, t
+        if best_v != defaults[k]:
+            picked[k] = best_v
+    return picked
+
+
+def _default_of(cfg: Any, key: str) -> Any:
+    obj = cfg
+    for part in key.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
+    """Run the protocol of the module docstring; returns the JSON-ready report."""
+    from experiments.scenes import dev_scenes, load_dev_scene
+    from somtorch.config import PipelineConfig
+
+    specs = dev_scenes(cfg.scenes)
+    data_dir = Path(to_absolute_path(cfg.paths.data_dir))
+    grid = {k: list(v) for k, v in cfg.grid.items()}
+    base = PipelineConfig(**{f.name: getattr(cfg, f.name) for f in fields(PipelineConfig)})
+    defaults = {k: _default_of(base, k) for k in grid}
+    caches = []
+    for spec in specs:  # every file is read (and every map computed) before any training
+        caches.append(SceneCache(spec, load_dev_scene(spec, data_dir), base))
+    t0 = time.perf_counter()
+    for c in caches:
+        c.score({})
+        for k, values in grid.items():
+            for v in values:
+                c.score({} if v == defaults[k] else {k: v})
+        log.info("%s: default %d useful of %d (%.1f s)", c.spec.name, c.scores["default"]["useful_hits"],
+                 c.scores["default"]["runs"], time.perf_counter() - t0)
+    in_sample = choose(caches, grid, defaults)
+    rows = []
+    for i, c in enumerate(caches):
+        fold = choose(caches[:i] + caches[i + 1:], grid, defaults)
+        rows.append({"scene": c.spec.name, "computed": c.spec.computed, "default": c.score({}),
+                     "in_sample": c.score(in_sample), "left_out": c.score(fold), "fold_choice": fold})
+    totals = {part: {m: sum(r[part][m] for r in rows) for m in ("runs", "useful_hits", "all_objects_hits",
+                                                                  "identified_95", "no_object")}
+              for part in ("default", "in_sample", "left_out")}
+    return {"grid": grid, "defaults": defaults, "in_sample_choice": in_sample, "rows": rows, "totals": totals,
+            "candidates": {c.spec.name: c.scores for c in caches}, "wall_s": time.perf_counter() - t0}
+
+
+def to_markdown(report: dict[str, Any]) -> str:
+    """The left-out table: per scene default / in-sample / left-out useful and all-objects hits."""
+    out = ["| scene | runs | default useful | in-sample useful | **left-out useful** | default all-obj | "
+           "left-out all-obj | ground ∩ objects | left-out choice |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in report["rows"]:
+        d, i, lo = r["default"], r["in_sample"], r["left_out"]
+        choice = ", ".join(f"{k}={v}" for k, v in r["fold_choice"].items()) or "defaults"
+        out.append(f"| {r['scene']} | {d['runs']} | {d['useful_hits']} | {i['useful_hits']} | **{lo['useful_hits']}** | "
+                   f"{d['all_objects_hits']} | {lo['all_objects_hits']} | {d['ground_object_frac']:.1%} | {choice} |")
+    t = report["totals"]
+    out.append(f"| **total** | {t['default']['runs']} | {t['default']['useful_hits']} | {t['in_sample']['useful_hits']} | "
+               f"**{t['left_out']['useful_hits']}** | {t['default']['all_objects_hits']} | "
+               f"{t['left_out']['all_objects_hits']} | | in-sample choice: "
+               f"{', '.join(f'{k}={v}' for k, v in report['in_sample_choice'].items()) or 'defaults'} |")
+    out += ["", "Useful hits per candidate (one constant changed):", "",
+            "| candidate | " + " | ".join(r["scene"] for r in report["rows"]) + " | total |",
+            "|---" * (len(report["rows"]) + 2) + "|"]
+    cands = report["candidates"]
+    names = [r["scene"] for r in report["rows"]]
+    for key in cands[names[0]]:
+        vals = [cands[n][key]["useful_hits"] if key in cands[n] else None for n in names]
+        if None in vals:
+            continue
+        out.append(f"| {key} | " + " | ".join(map(str, vals)) + f" | {sum(vals)} |")
+    return "\n".join(out) + "\n"
+
+
+ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="validate")
+def main(dcfg: DictConfig) -> int:
+    from somtorch.atomic import write_bytes, write_json
+
+    cfg: ValidateConfig = OmegaConf.to_object(dcfg)
+    out = Path(HydraConfig.get().runtime.output_dir)
+    report = evaluate(cfg)
+    write_json(out / "validate.json", report)
+    write_bytes(out / "validate.md", to_markdown(report).encode())
+    t = report["totals"]
+    log.info("useful hits: default %d, in-sample %d, left-out %d of %d; tables in %s", t["default"]["useful_hits"],
+             t["in_sample"]["useful_hits"], t["left_out"]["useful_hits"], t["default"]["runs"], out / "validate.md")
+    return int(t["left_out"]["useful_hits"])
+
+
+register()
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,200 @@
+"""One evaluation layer: per-run records, per-object scores, the all-objects reading, summaries.
+
+Used by ``somtorch-run``, the studies, the validation protocol and the scripts, so every table is
+scored by the same code (:mod:`somtorch.tasks.scoring` scores one reduction against one mask).
+
+* **useful hit** (main object): ≥ 95 % of the scored object inside the kept boxes and a reduction
+  ≥ 0.75 × x_opt (the reduction of keeping exactly the object's box);
+* **all-objects hit**: *every* labelled object with a valid pixel ≥ 95 % inside the kept union
+  and a reduction ≥ 0.75 × the reduction of keeping exactly the union of the objects' boxes;
+* **ground-object share**: share of the objects' valid pixels that the ground mask removed
+  (they can then never be kept as an object; the target is ≈ 0).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from .disparity.scene import Scene
+from .tasks.ground import GroundPlane
+from .tasks.reduction import Reduction, reduce_map
+from .tasks.scoring import object_box, score_reduction
+
+__all__ = ["AllObjects", "all_objects", "ground_object_share", "merge_runs", "per_object_scores", "run_records",
+           "segment_f1", "summarize_runs", "summary_stats"]
+
+
+def summary_stats(values: list[float]) -> dict[str, float | int | None]:
+    """``n``, ``min``, ``mean``, ``max`` and ``median`` of a list (None for an empty one)."""
+    if not values:
+        return {"n": 0, "min": None, "mean": None, "max": None, "median": None}
+    a = np.asarray(values, dtype=np.float64)
+    return {"n": int(a.size), "min": float(a.min()), "mean": float(a.mean()), "max": float(a.max()),
+            "median": float(np.median(a))}
+
+
+_stats = summary_stats
+
+
+@dataclass
+class AllObjects:
+    """The labelled objects of a scene as one target: their masks and the union-of-boxes reduction."""
+
+    masks: list[torch.Tensor]
+    valid: torch.Tensor
+    x_opt: float  # reduction in % when exactly the union of the objects' boxes is kept
+
+    def hit(self, reduction: Reduction, *, useful_factor: float = 0.75, min_fraction: float = 0.95) -> bool:
+        """Every object ≥ ``min_fraction`` inside the kept union and reduction ≥ factor × x_opt."""
+        for m in self.masks:
+            obj = m & self.valid
+            if int((obj & reduction.mask).sum()) < min_fraction * int(obj.sum()):
+                return False
+        return reduction.reduction_union >= useful_factor * self.x_opt
+
+
+def all_objects(scene: Scene) -> AllObjects | None:
+    """:class:`AllObjects` of ``scene`` (objects without a valid pixel are left out), None if unlabelled."""
+    if scene.objects is None:
+        return None
+    masks = [scene.object_mask(o.id) for o in scene.object_info]
+    masks = [m for m in masks if bool((m & scene.valid).any())]
+    if not masks:
+        return None
+    x_opt = reduce_map([object_box(m) for m in masks], scene.valid).reduction_union
+    return AllObjects(masks, scene.valid, x_opt)
+
+
+def ground_object_share(ground: GroundPlane | None, scene: Scene) -> float:
+    """Share of the labelled objects' valid pixels inside the ground mask (0 without a plane)."""
+    if ground is None or scene.objects is None:
+        return 0.0
+    obj = (scene.objects > 0) & scene.valid
+    n = int(obj.sum())
+    return int((obj & ground.mask).sum()) / n if n else 0.0
+
+
+def segment_f1(labels, obj) -> tuple[float, float, float]:
+    """Segmentation precision against the object mask: the union of the segments whose pixels are
+    mostly object pixels, scored as precision / recall / F1 of the object's valid pixels. Finer
+    segmentations follow the object's outline more closely (the paper's Fig. 13)."""
+    ok = labels >= 0
+    lab = labels[ok]
+    o = obj[ok]
+    k = int(lab.max()) + 1 if lab.numel() else 1
+    cnt = torch.bincount(lab, minlength=k)
+    hit = torch.bincount(lab[o], minlength=k)
+    major = hit * 2 > cnt
+    sel = major[lab]
+    tp = int((sel & o).sum())
+    p = tp / max(int(sel.sum()), 1)
+    r = tp / max(int(o.sum()), 1)
+    return p, r, (2 * p * r / (p + r) if p + r > 0 else 0.0)
+
+
+def run_records(scene, result, obj_mask, per_run_s: list[float] | None) -> dict[str, list]:
+    """Per-run values of one pipeline result (one entry per member)."""
+    runs: dict[str, list] = {k: [] for k in (
+        "seed", "identified_fraction", "identified_100", "identified_95", "useful_hit", "reduction_union",
+        "reduction_crops", "kept_areas", "area_px", "area_frac", "area_precision", "segment_precision",
+        "segment_recall", "segment_f1", "n_areas", "quantization_error", "topographic_error", "runtime_s",
+        "no_object", "all_objects_hit", "ground_object_frac")}
+    everything = all_objects(scene) if obj_mask is not None else None
+    ground_frac = ground_object_share(result.ground, scene) if obj_mask is not None else None
+    t = result.timings
+    e_n = len(result.members)
+    shared = sum(v for k, v in t.items() if k not in ("objects", "reduction")) / e_n
+    own = (t.get("objects", 0.0) + t.get("reduction", 0.0)) / e_n
+    for e, m in enumerate(result.members):
+        runs["seed"].append(m.seed)
+        runs["n_areas"].append(len(m.areas))
+        runs["kept_areas"].append(len(m.kept))
+        area_mask = torch.zeros_like(scene.valid)
+        for a in m.kept:
+            area_mask |= a.mask(result.labels[e])
+        px = int(area_mask.sum())
+        runs["area_px"].append(px)
+        runs["area_frac"].append(px / max(scene.n_valid, 1))
+        runs["reduction_union"].append(m.reduction.reduction_union)
+        runs["reduction_crops"].append(m.reduction.reduction_crops)
+        q, te = float(result.quantization_error[e]), float(result.topographic_error[e])
+        runs["quantization_error"].append(q if q == q else None)
+        runs["topographic_error"].append(te if te == te else None)
+        runs["runtime_s"].append(per_run_s[e] if per_run_s is not None else shared + own)
+        runs["no_object"].append(m.no_object)
+        if obj_mask is not None:
+            s = m.score
+            obj = obj_mask & scene.valid
+            runs["identified_fraction"].append(s.identified_fraction)
+            runs["identified_100"].append(s.identified_100)
+            runs["identified_95"].append(s.identified_95)
+            runs["useful_hit"].append(s.useful_hit)
+            runs["area_precision"].append(int((area_mask & obj).sum()) / px if px else 0.0)
+            p, r, f1 = segment_f1(result.labels[e], obj)
+            runs["segment_precision"].append(p)
+            runs["segment_recall"].append(r)
+            runs["segment_f1"].append(f1)
+            runs["all_objects_hit"].append(everything.hit(m.reduction) if everything is not None else False)
+            runs["ground_object_frac"].append(ground_frac)
+    return {k: v for k, v in runs.items() if v}
+
+
+def merge_runs(parts: list[dict[str, list]]) -> dict[str, list]:
+    out: dict[str, list] = {}
+    for p in parts:
+        for k, v in p.items():
+            out.setdefault(k, []).extend(v)
+    return out
+
+
+def summarize_runs(runs: dict[str, list], x_opt: float | None) -> dict[str, Any]:
+    """The Table 1 / Table 2 numbers of one job from its per-run values."""
+
+    n = len(runs["seed"])
+    out: dict[str, Any] = {"runs": n, "reduction_all": _stats(runs["reduction_union"]),
+                           "runtime_s": _stats(runs["runtime_s"]), "area_frac": _stats(runs["area_frac"])}
+    if "identified_fraction" not in runs:
+        return out
+    id100, id95, useful = runs["identified_100"], runs["identified_95"], runs["useful_hit"]
+    pick = lambda key, flags: [v for v, f in zip(runs[key], flags) if f]  # noqa: E731
+    tradeoff = [f * max(0.0, min(1.0, r / x_opt)) if x_opt else 0.0
+                for f, r in zip(id95, runs["reduction_union"])]
+    out.update({
+        "identified_100": int(sum(id100)), "identified_95": int(sum(id95)), "useful_hits": int(sum(useful)),
+        "x_opt": x_opt,
+        "mean_identified_fraction": float(sum(runs["identified_fraction"]) / n),
+        # Table 2: over the runs with complete identification (the paper), and over the >= 95 % runs
+        "reduction_complete": _stats(pick("reduction_union", id100)),
+        "reduction_crops_complete": _stats(pick("reduction_crops", id100)),
+        "reduction_95": _stats(pick("reduction_union", id95)),
+        "reduction_crops_95": _stats(pick("reduction_crops", id95)),
+        "segment_f1": _stats(runs["segment_f1"]), "area_precision": _stats(runs["area_precision"]),
+        # in [0, 1]: mean over runs of [>= 95 % identified] * min(1, reduction / x_opt) (Optuna's objective)
+        "tradeoff": float(sum(tradeoff) / n),
+    })
+    if "all_objects_hit" in runs:
+        out["all_objects_hits"] = int(sum(runs["all_objects_hit"]))
+        out["ground_object_frac"] = runs["ground_object_frac"][0]
+    if "no_object" in runs:
+        out["no_object"] = int(sum(runs["no_object"]))
+    return out
+
+
+def per_object_scores(scene, results: list) -> dict[str, Any]:
+    out = {}
+    for info in scene.object_info:
+        mask = scene.object_mask(info.id)
+        if not bool((mask & scene.valid).any()):
+            continue
+        s = [score_reduction(m.reduction, mask, scene.valid) for r in results for m in r.members]
+        out[str(info.id)] = {"name": info.name, "main": info.main, "identified_95": sum(x.identified_95 for x in s),
+                             "identified_100": sum(x.identified_100 for x in s),
+                             "mean_identified_fraction": sum(x.identified_fraction for x in s) / len(s),
+                             "x_opt": s[0].x_opt}
+    return out
+
+

@@ -1,0 +1,175 @@
+"""Paper step 1b as a registry of segmenters: each turns the pixel features into one :class:`Segmentation`.
+
+Every segmenter registers under its name (``register``) and is scored by the same object step,
+reduction and scoring, so baselines compare like for like:
+
+* ``"som"`` — our SOM (``som`` / ``train`` groups), E members trained as one tensor op;
+* ``"minisom"`` — the MiniSom library the paper cites, one map per seed (online rule only);
+* ``"kmeans"`` — Lloyd's k-means on the same features with K = rows·cols, batched over seeds;
+* ``"slic"`` / ``"felzenszwalb"`` — scikit-image superpixels of the disparity image (deterministic:
+  one run whatever ``ensemble`` says).
+
+Segmenters without a grid (k-means, superpixels) refuse ``objects.link="grid"``: linking through a
+grid they do not have would silently mean something else.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import nullcontext
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+
+from .config import PipelineConfig
+from .core import SOM, StepInfo
+from .disparity.features import Features
+from .tasks.segmentation import segment
+
+__all__ = ["METHODS", "SEGMENTERS", "Segmentation", "Segmenter", "register", "run_segmenter"]
+
+
+@dataclass
+class Segmentation:
+    """What step 1b hands to the object step.
+
+    Attributes:
+        labels: segment of every pixel, −1 where not segmented (invalid or ground) ``(E, H, W)``.
+        ref_disparity: reference disparity of each segment in px ``(E, K)``.
+        grid_d2: squared SOM-grid distances ``(K, K)``, or None for segmenters without a grid.
+        prototypes: feature-space centres ``(E, K, D)`` (SOM weights, k-means centres) or None.
+        som: the trained maps (``"som"`` / ``"minisom"``) or None.
+        seeds: the seed of each member.
+    """
+
+    labels: torch.Tensor
+    ref_disparity: torch.Tensor
+    grid_d2: torch.Tensor | None
+    prototypes: torch.Tensor | None
+    som: SOM | None
+    seeds: list[int]
+
+    @property
+    def num_segments(self) -> int:
+        return int(self.ref_disparity.shape[-1])
+
+
+@dataclass(frozen=True)
+class Segmenter:
+    """A registered segmenter: ``fn(feats, train, scene, usable, cfg, runs, progress, callback)``."""
+
+    name: str
+    fn: Callable[..., Segmentation]
+    deterministic: bool = False
+    has_grid: bool = False
+
+
+SEGMENTERS: dict[str, Segmenter] = {}
+
+
+def register(name: str, *, deterministic: bool = False, has_grid: bool = False) -> Callable:
+    """Decorator: register ``fn`` as the segmenter ``name``."""
+    def deco(fn: Callable[..., Segmentation]) -> Callable[..., Segmentation]:
+        SEGMENTERS[name] = Segmenter(name, fn, deterministic, has_grid)
+        return fn
+    return deco
+
+
+def _from_prototypes(weight: torch.Tensor, feats: Features, grid_d2: torch.Tensor | None, som: SOM | None,
+                     seeds: list[int]) -> Segmentation:
+    """A segmentation whose pixels are labelled later (by :func:`run_segmenter`, timed apart)."""
+    ref_d = feats.to_pixel_units(weight)[..., 2]  # (E, K) px
+    return Segmentation(None, ref_d, grid_d2, weight, som, seeds)  # type: ignore[arg-type]
+
+
+def _new_som(cfg: PipelineConfig, runs: int) -> SOM:
+    s = cfg.som
+    return SOM(s.rows, s.cols, 3, ensemble=runs, topology=s.topology, toroidal=s.toroidal, seed=cfg.seed)
+
+
+@register("som", has_grid=True)
+def _som(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg: PipelineConfig, runs: int,
+         progress: bool, log_training: Callable[[str, float, int], Any] | None) -> Segmentation:
+    som, tc = _new_som(cfg, runs), cfg.train
+    callback = None
+    if log_training is not None:
+        def callback(info: StepInfo) -> None:
+            step = round(info.epoch)
+            log_training("train/quantization_error", float(som.quantization_error(train.x).mean()), step)
+            log_training("train/topographic_error", float(som.topographic_error(train.x).mean()), step)
+            log_training("train/sigma", float(info.sigma.mean()), step)
+    som.fit(train.x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
+            sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, order=tc.order,
+            batch_size=tc.batch_size, init=cfg.som.init, progress=progress, callback=callback)
+    return _from_prototypes(som.weight.detach(), feats, som.grid_d2, som, som.seeds)
+
+
+@register("minisom", has_grid=True)
+def _minisom(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg: PipelineConfig, runs: int,
+             progress: bool, log_training: Any) -> Segmentation:
+    from .baselines.minisom_som import train_minisom
+
+    tc, s = cfg.train, cfg.som
+    if tc.mode != "online":
+        raise ValueError(f"method='minisom' trains with MiniSom's online rule; got train.mode={tc.mode!r} "
+                         "(use train=online)")
+    som = _new_som(cfg, runs)
+    som.weight = train_minisom(train.x, s.rows, s.cols, seeds=som.seeds, epochs=tc.epochs, sigma=tc.sigma,
+                               lr=tc.lr, order=tc.order, neighborhood=tc.neighborhood,
+                               init="pca" if s.init == "pca" else "sample").to(som.weight)
+    return _from_prototypes(som.weight.detach(), feats, som.grid_d2, som, som.seeds)
+
+
+@register("kmeans")
+def _kmeans(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg: PipelineConfig, runs: int,
+            progress: bool, log_training: Any) -> Segmentation:
+    from .baselines.kmeans import kmeans
+
+    centers = kmeans(train.x, cfg.som.rows * cfg.som.cols, ensemble=runs, seed=cfg.seed,
+                     iterations=cfg.baseline.kmeans_iterations, init=cfg.baseline.kmeans_init).centers
+    return _from_prototypes(centers, feats, None, None, [cfg.seed + e for e in range(runs)])
+
+
+def _superpixels(method: str) -> Callable[..., Segmentation]:
+    def fn(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg: PipelineConfig, runs: int,
+           progress: bool, log_training: Any) -> Segmentation:
+        from .baselines.superpixels import superpixel_labels
+        from .tasks.objects import neuron_stats
+
+        b = cfg.baseline
+        labels = superpixel_labels(scene.disparity, usable, method=method,
+                                   n_segments=b.n_segments or cfg.som.rows * cfg.som.cols,
+                                   compactness=b.slic_compactness, scale=b.fz_scale, sigma=b.fz_sigma,
+                                   min_size=b.fz_min_size)[None]
+        # a segment's reference disparity is its mean disparity
+        stats = neuron_stats(labels[0], scene.disparity, int(labels.max()) + 1)
+        ref_d = torch.nan_to_num(stats.mean_d).float()[None]
+        return Segmentation(labels, ref_d, None, None, None, [cfg.seed])
+    return fn
+
+
+for _name in ("slic", "felzenszwalb"):
+    register(_name, deterministic=True)(_superpixels(_name))
+
+METHODS = tuple(SEGMENTERS)
+
+
+def run_segmenter(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg: PipelineConfig, *,
+                  progress: bool = False, log_training: Callable[[str, float, int], Any] | None = None,
+                  timer: Callable[[str], Any] = lambda stage: nullcontext()) -> Segmentation:
+    """Run the segmenter ``cfg.method`` (checks first that it can honour ``cfg.objects.link``).
+
+    ``timer(stage)``: a context manager timing the stages ``"train"`` and ``"segment"`` (the BMU
+    labelling of every pixel, for segmenters with prototypes).
+    """
+    seg = SEGMENTERS[cfg.method]
+    if not seg.has_grid and cfg.objects.link != "image":
+        raise ValueError(f"method={cfg.method!r} has no SOM grid, so objects.link={cfg.objects.link!r} cannot "
+                         "be honoured; use objects.link=image")
+    with timer("train"):
+        out = seg.fn(feats, train, scene, usable, cfg, cfg.runs, progress, log_training)
+    with timer("segment"):
+        if out.labels is None:
+            out.labels = segment(out.prototypes, feats.x, feats.pixels, feats.shape)  # (E, H, W)
+    return out

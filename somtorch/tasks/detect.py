@@ -1,0 +1,161 @@
+"""Paper step 1c as one capability: from one member's segmentation to its kept object areas.
+
+:func:`find_objects` is the entry point. What does not depend on the member (the valid-mask
+integral image, the disparity spread, the map's own solidity, the ground residual) lives in a
+:class:`MapContext` built once per map (:meth:`MapContext.build`) and shared by every member of an
+ensemble. Per member it
+
+1. computes the segments' statistics (:func:`~somtorch.tasks.objects.neuron_stats`),
+2. finds the object areas (:func:`~somtorch.tasks.objects.find_object_areas`),
+3. ranks the candidates (:func:`~somtorch.tasks.objects.select_areas`) and, in rank order, joins,
+   refines and checks each (:func:`kept_areas`),
+4. and, when nothing convincing is left and ``fail_safe`` is on, keeps the whole map and flags
+   ``no_object`` — for a system meant to keep obstacles, dropping everything is the worst outcome.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import torch
+
+from ..config import AreaConfig
+from .ground import GroundPlane
+from .objects import NeuronStats, ObjectArea, disparity_spread, find_object_areas, neuron_stats, select_areas
+from .reduction import valid_integral
+from .refine import _opened_share, _square, box_purity, grow_area, map_solidity, merge_adjacent, refine_box
+
+__all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "rank_score"]
+
+
+@dataclass
+class MapContext:
+    """What the object step needs of one map, the same for every member.
+
+    Attributes:
+        disparity: the map in px ``(H, W)``.
+        valid: pixels with a disparity ``(H, W)``.
+        usable: pixels that were segmented (valid, not ground) ``(H, W)``.
+        integral: integral image of ``valid`` ``(H+1, W+1)``.
+        spread: :func:`~somtorch.tasks.objects.disparity_spread` of the segmented pixels.
+        solidity: :func:`~somtorch.tasks.refine.map_solidity` of the segmented pixels.
+        ground_residual: |disparity − ground plane| ``(H, W)`` or None (no plane, or clutter off).
+        clutter_band: ``ground_clutter ×`` the plane's inlier band, px (0 without a plane).
+    """
+
+    disparity: torch.Tensor
+    valid: torch.Tensor
+    usable: torch.Tensor
+    integral: torch.Tensor
+    spread: tuple[tuple[float, float], tuple[float, float]]
+    solidity: float
+    ground_residual: torch.Tensor | None
+    clutter_band: float
+
+    @classmethod
+    def build(cls, disparity: torch.Tensor, valid: torch.Tensor, segmented: torch.Tensor,
+              ground: GroundPlane | None, cfg: AreaConfig) -> MapContext:
+        """The context of a map whose ``segmented`` ``(H, W)`` pixels carry a label (``labels >= 0``)."""
+        h, w = disparity.shape
+        residual, band = None, 0.0
+        if ground is not None and cfg.ground_clutter > 0 and not cfg.grow:
+            residual = (disparity - ground.disparity(h, w)).abs()
+            band = cfg.ground_clutter * ground.tol
+        lab = torch.where(segmented, 0, -1)
+        return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
+                   map_solidity(lab, cfg), residual, band)
+
+
+@dataclass
+class ObjectResult:
+    """One member's object step: every area, the kept ones (best first), and whether it fell back."""
+
+    stats: NeuronStats
+    areas: list[ObjectArea]
+    kept: list[ObjectArea]
+    no_object: bool = False
+
+
+def rank_score(area: ObjectArea, cfg: AreaConfig) -> float:
+    """The salient ranking's score: ``contrast × area_frac ** size_power``."""
+    return area.contrast * area.area_frac ** cfg.size_power
+
+
+def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
+                 ctx: MapContext, cfg: AreaConfig | None = None) -> ObjectResult:
+    """Step 1c on one member (see the module docstring).
+
+    Shape:
+        ``labels`` ``(H, W)`` long (−1 not segmented); ``ref_disparity`` ``(K,)`` px;
+        ``grid_d2`` ``(K, K)`` or None.
+    """
+    cfg = cfg or AreaConfig()
+    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread)
+    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
+    kept = kept_areas(areas, stats, labels, cfg, ctx)
+    if kept:
+        return ObjectResult(stats, areas, kept)
+    # nothing convincing: keep the whole map rather than nothing
+    ys, xs = ctx.valid.nonzero(as_tuple=True)
+    box = (int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())) if ys.numel() else (0, 0, -1, -1)
+    whole = ObjectArea(sorted({int(v) for v in labels.unique().tolist()} - {-1}), int(ctx.valid.sum()), box,
+                       float(ctx.disparity[ctx.valid].mean()) if ys.numel() else 0.0, 0.0, 1.0, 0, confidence=0.0)
+    return ObjectResult(stats, areas, [whole], no_object=True)
+
+
+def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
+               ctx: MapContext) -> list[ObjectArea]:
+    """Select, join, refine (or grow) and check the candidates in rank order.
+
+    Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with
+    segments of an area kept before it), its box refined (:func:`refine_box`) or grown
+    (:func:`grow_area`), and kept if its :func:`box_purity` reaches ``cfg.min_purity`` and its
+    segments' solidity reaches ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a
+    dense map's standard). After the first kept area, a further one must score at least
+    ``cfg.keep_ratio ×`` the best candidate's rank score. At most ``cfg.max_areas`` are kept and
+    ``cfg.max_areas + cfg.purity_candidates − 1`` candidates tried. If none passed: the
+    best-ranked candidate, or nothing with ``cfg.fail_safe`` (the caller keeps the whole map).
+
+    Every kept area carries its ``purity``, ``solidity`` (relative to the map's) and
+    ``confidence`` (rank score over the best candidate's).
+
+    Shape:
+        ``labels`` ``(H, W)``.
+    """
+    checks = cfg.min_purity > 0 or cfg.min_solidity > 0
+    tries = cfg.max_areas + (cfg.purity_candidates - 1 if checks else 0)
+    ranked = select_areas(areas, stats, replace(cfg, max_areas=tries))
+    taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
+    kept, first = [], None
+    lab_s = labels[::cfg.grow_stride, ::cfg.grow_stride]  # as in the box refinement
+    square = _square(labels.shape, cfg.solidity_size, cfg.grow_stride)
+    best = max((rank_score(a, cfg) for a in ranked), default=0.0)
+    for cand in ranked:
+        if bool(taken[torch.tensor(cand.neurons)].any()):
+            continue
+        confidence = rank_score(cand, cfg) / best if best > 0 else 1.0
+        if kept and confidence < cfg.keep_ratio:
+            break
+        joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
+                                max_area_frac=cfg.max_area_frac, exclude=taken)[0]
+        if cfg.grow:
+            done = grow_area(joined, labels, ctx.disparity, ctx.usable, stride=cfg.grow_stride)
+        else:
+            done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
+                              stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
+                              clutter_band=ctx.clutter_band)
+        own = torch.isin(lab_s, torch.tensor(done.neurons, dtype=labels.dtype))
+        done = replace(done, purity=box_purity(done, labels, ctx.integral),
+                       solidity=_opened_share(own, square) / ctx.solidity, confidence=confidence)
+        if first is None:
+            first = done
+        if done.purity >= cfg.min_purity and done.solidity >= cfg.min_solidity:
+            kept.append(done)
+            taken[torch.tensor(done.neurons)] = True
+            if len(kept) == cfg.max_areas:
+                break
+    if not kept and first is not None and not cfg.fail_safe:
+        kept = [first]
+    for i, a in enumerate(kept):
+        a.rank = i
+    return kept
