@@ -35,7 +35,7 @@ class SceneSpec:
 
 
 def dev_scenes(names: list[str] | None = None) -> list[SceneSpec]:
-    """The specs of ``conf/scene_lists/dev.yaml`` (all, or those named, in the file's order)."""
+    """The specs of ``conf/scene_lists/dev.yaml``: all in the file's order, or those named in the given order."""
     import yaml
 
     specs = [SceneSpec(**d) for d in yaml.safe_load(SCENES_FILE.read_text())]
@@ -45,7 +45,8 @@ def dev_scenes(names: list[str] | None = None) -> list[SceneSpec]:
     unknown = [n for n in names if n not in known]
     if unknown:
         raise ValueError(f"unknown development scene(s) {unknown}; {SCENES_FILE} lists {sorted(known)}")
-    return [s for s in specs if s.name in names]
+    by_name = {s.name: s for s in specs}
+    return [by_name[n] for n in names]
 
 
 def load_dev_scene(spec: SceneSpec, data_dir: str | Path) -> Any:

@@ -53,9 +53,11 @@ def main(argv: list[str] | None = None) -> list[dict]:
     print("|---|---|---|---|---|---|")
     for spec in args.scenes:
         members = run_pipeline(load_scene(args.data_dir / spec), cfg, metrics=False).members
-        purity = np.array([m.kept[0].purity for m in members])
-        solid = np.array([m.kept[0].solidity for m in members])
-        row = {"scene": spec, "runs": len(members), "low_purity": int((purity < BOUND).sum()),
+        found = [m for m in members if not m.no_object]  # fail-safe runs keep the whole map: not junk
+        purity = np.array([m.kept[0].purity for m in found] or [np.nan])
+        solid = np.array([m.kept[0].solidity for m in found] or [np.nan])
+        row = {"scene": spec, "runs": len(members), "no_object": len(members) - len(found),
+               "low_purity": int((purity < BOUND).sum()),
                "low_solidity": int((solid < BOUND).sum()), "median_purity": float(np.median(purity)),
                "median_solidity": float(np.median(solid))}
         rows.append(row)

@@ -50,6 +50,7 @@ class ValidateConfig(RunConfig):
 
     scenes: Optional[list[str]] = None
     grid: dict[str, list[Any]] = field(default_factory=dict)
+    gallery: Optional[str] = None  # a folder: one picture of member 0 per scene (defaults)
 
 
 def _key(overrides: dict[str, Any]) -> str:
@@ -93,23 +94,82 @@ class SceneCache:
         return self.scores[key]
 
 
+    def gallery(self, path: Path, overrides: dict[str, Any] | None = None, member: int = 0) -> Path:
+        """A picture of one member: disparity (turbo, px), ground mask (blue), object masks (green
+        outline), kept boxes with the tolerance (red, with confidence), and its verdict."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        import numpy as np
+
+        from somtorch.config import with_overrides
+        from somtorch.pipeline import detect, prepare
+        from somtorch.segmenters import run_segmenter
+
+        cfg = with_overrides(self.base, dict(overrides or {}, ensemble=max(self.base.ensemble, member + 1)))
+        up = _key({k: v for k, v in (overrides or {}).items() if k.split(".")[0] in UPSTREAM})
+        if up not in self._seg:
+            valid, ground, usable, feats, train = prepare(self.scene, cfg)
+            self._seg[up] = (ground, run_segmenter(feats, train, self.scene, usable, cfg))
+        ground, seg = self._seg[up]
+        m = detect(self.scene, seg, ground, cfg)[member]
+        sc = self.scene
+        d = np.where(sc.valid.numpy(), sc.disparity.numpy(), np.nan)
+        fig, ax = plt.subplots(figsize=(7.5, 7.5 * sc.height / sc.width + 0.8), dpi=80)
+        lo, hi = np.nanpercentile(d, [1, 99])
+        im = ax.imshow(d, cmap="turbo", vmin=lo, vmax=hi)
+        fig.colorbar(im, ax=ax, fraction=0.03, pad=0.01, label="disparity [px]")
+        if ground is not None:
+            ax.imshow(np.ma.masked_where(~ground.mask.numpy(), np.ones(ground.mask.shape)), cmap="Blues",
+                      vmin=0, vmax=1.5, alpha=0.6)
+        if sc.objects is not None:
+            ax.contour((sc.objects > 0).numpy().astype(float), levels=[0.5], colors="lime", linewidths=1.2)
+        for a, b in zip(m.kept, m.reduction.boxes):
+            x0, y0, x1, y1 = b
+            ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ec="red", lw=2))
+            ax.text(x0 + 3, y0 + 12, f"{a.confidence:.2f}" if a.confidence is not None else "", color="red",
+                    fontsize=9, weight="bold")
+        s = m.score
+        verdict = (f"identified {s.identified_fraction:.0%}, reduction {s.reduction_union:.1f} % "
+                   f"(x_opt {s.x_opt:.1f} %): {'useful' if s.useful_hit else 'not useful'}"
+                   + (", no object (whole map kept)" if m.no_object else ""))
+        ax.set_title(f"{self.spec.name} (seed {m.seed}) — {verdict}\nred: kept boxes (confidence); "
+                     "green: labelled objects; blue: ground mask", fontsize=9)
+        ax.set_axis_off()
+        fig.tight_layout()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path)
+        plt.close(fig)
+        return path
+
+
 def choose(caches: list[SceneCache], grid: dict[str, list[Any]], defaults: dict[str, Any]) -> dict[str, Any]:
     """Each constant's value with the most useful hits (then all-objects hits) summed over ``caches``,
     the others at their default; the default wins ties. Returns only the changed constants."""
-    picked = {}
+    picked: dict[str, Any] = {}
     for k, values in grid.items():
         def total(v: Any) -> tuple[int, int]:
-            ov = {} if v == defaults[k] else {k: v}
-            rows = [c.score(ov) for c in caches]
+            rows = [c.score(_overrides(k, v, defaults)) for c in caches]
             return sum(r["useful_hits"] for r in rows), sum(r["all_objects_hits"] for r in rows)
         best_v, best = defaults[k], total(defaults[k])
         for v in values:
             t = total(v)
             if t > best:
                 best_v, best = v, t
-        if best_v != defaults[k]:
-            picked[k] = best_v
+        picked.update(_overrides(k, best_v, defaults))
     return picked
+
+
+def _overrides(key: str, value: Any, defaults: dict[str, Any]) -> dict[str, Any]:
+    """The overrides of one grid value; a key ``"a.b+c.d"`` sets several fields at once (``value`` a list)."""
+    if value == defaults[key]:
+        return {}
+    names = key.split("+")
+    values = list(value) if len(names) > 1 else [value]
+    if len(values) != len(names):
+        raise ValueError(f"grid {key!r}: value {value!r} must give {len(names)} values")
+    return dict(zip(names, values))
 
 
 def _default_of(cfg: Any, key: str) -> Any:
@@ -128,7 +188,8 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
     grid = {k: list(v) for k, v in cfg.grid.items()}
     base = PipelineConfig(**{f.name: getattr(cfg, f.name) for f in fields(PipelineConfig)})
-    defaults = {k: _default_of(base, k) for k in grid}
+    defaults = {k: _default_of(base, k) if "+" not in k else [_default_of(base, n) for n in k.split("+")]
+                for k in grid}
     caches = []
     for spec in specs:  # every file is read (and every map computed) before any training
         caches.append(SceneCache(spec, load_dev_scene(spec, data_dir), base))
@@ -137,7 +198,7 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
         c.score({})
         for k, values in grid.items():
             for v in values:
-                c.score({} if v == defaults[k] else {k: v})
+                c.score(_overrides(k, v, defaults))
         log.info("%s: default %d useful of %d (%.1f s)", c.spec.name, c.scores["default"]["useful_hits"],
                  c.scores["default"]["runs"], time.perf_counter() - t0)
     in_sample = choose(caches, grid, defaults)
@@ -149,6 +210,9 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     totals = {part: {m: sum(r[part][m] for r in rows) for m in ("runs", "useful_hits", "all_objects_hits",
                                                                   "identified_95", "no_object")}
               for part in ("default", "in_sample", "left_out")}
+    if cfg.gallery is not None:
+        for c in caches:
+            c.gallery(Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
     return {"grid": grid, "defaults": defaults, "in_sample_choice": in_sample, "rows": rows, "totals": totals,
             "candidates": {c.spec.name: c.scores for c in caches}, "wall_s": time.perf_counter() - t0}
 

@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, ClassVar
 
 __all__ = [
-    "AreaConfig", "BaselineConfig", "Choice", "FeatureConfig", "GroundConfig", "Interval", "OneOf",
+    "AreaConfig", "BaselineConfig", "Choice", "FeatureConfig", "Flag", "GroundConfig", "Interval", "OneOf",
     "OutputConfig", "PipelineConfig", "ReductionConfig", "SOMConfig", "TrainConfig", "Validated", "with_overrides",
 ]
 
@@ -95,11 +95,20 @@ class OneOf:
             raise ValueError(f"{name} must be one of {list(self.values)}; got {value!r}")
 
 
+@dataclass(frozen=True)
+class Flag:
+    """A bool (``1`` / ``"yes"`` are not)."""
+
+    def check(self, name: str, value: Any) -> None:
+        if not isinstance(value, bool):
+            raise TypeError(f"{name} must be true or false; got {type(value).__name__} {value!r}")
+
+
 POSITIVE = Interval(0, None, open_lo=True)
 NON_NEGATIVE = Interval(0, None)
 POSITIVE_INT = Interval(1, None, integer=True)
 FRACTION = Interval(0, 1)
-BOOL = OneOf((True, False))
+BOOL = Flag()
 
 
 class Validated:
@@ -116,10 +125,7 @@ class Validated:
     def __post_init__(self) -> None:
         prefix = f"{self._group}." if self._group else ""
         for name, rule in self._constraints.items():
-            value = getattr(self, name)
-            if isinstance(rule, OneOf) and rule.values == (True, False) and isinstance(value, bool):
-                continue
-            rule.check(prefix + name, value)
+            rule.check(prefix + name, getattr(self, name))
         for ok, message in self._relations:
             if not ok(self):
                 raise ValueError(f"{self._group or type(self).__name__}: {message.format(c=self)}")
@@ -252,8 +258,15 @@ class GroundConfig(Validated):
         max_top_frac: a plane covering more than this share of the valid pixels of the top third
             of the image is not ground (a wall or a slanted object).
         max_below_frac: a support surface hides what lies beneath it, so at most this share of the
-            valid pixels the plane would cover may lie *behind* it (disparity below the band);
-            a ramp, a lattice or a plane through the objects fails (0 = off; 1 = no check).
+            valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
+            (disparity below the band); a ramp, a lattice or a plane through the objects fails
+            (1 = no check).
+        below_penalty: RANSAC scores a hypothesis by its inliers minus ``below_penalty ×`` the
+            sampled points behind it, so the support surface beats a plane through the objects
+            (0 = inliers only).
+        slope_rows: a ground pixel must also rise down the image like the plane, measured over
+            ``slope_rows ×`` the image height above and below it, so the vertical surfaces that
+            cross the plane's band (an object's base, legs) stay out of the mask (0 = off).
         iterations: RANSAC hypotheses.
         sample: pixels drawn for RANSAC.
         seed: RANSAC seed (the result does not depend on the SOM seed).
@@ -263,7 +276,7 @@ class GroundConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "enabled": BOOL, "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_top_frac": FRACTION, "max_below_frac": FRACTION,
-        "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
+        "below_penalty": NON_NEGATIVE, "slope_rows": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
     }
 
     enabled: bool = True
@@ -272,7 +285,9 @@ class GroundConfig(Validated):
     min_inlier_frac: float = 0.08
     min_slope_frac: float = 0.25
     max_top_frac: float = 0.15
-    max_below_frac: float = 1.0
+    max_below_frac: float = 0.1
+    below_penalty: float = 0.0
+    slope_rows: float = 0.0
     iterations: int = 200
     sample: int = 5000
     seed: int = 0
@@ -364,10 +379,10 @@ class AreaConfig(Validated):
     purity_candidates: int = 5
     select: str = "salient"
     max_areas: int = 1
-    keep_ratio: float = 1.0
-    fail_safe: bool = False
+    keep_ratio: float = 0.5
+    fail_safe: bool = True
     min_contrast: float = 0.02
-    max_area_frac: float = 0.5
+    max_area_frac: float = 0.7
     min_area_frac: float = 0.01
 
 
@@ -385,7 +400,7 @@ class ReductionConfig(Validated):
 
     tolerance_px: float = 0.0
     tolerance_frac: float = 0.0
-    tolerance_image: float = 0.02
+    tolerance_image: float = 0.015
 
 
 # ------------------------------------------------------------------------------------- outputs

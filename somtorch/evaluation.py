@@ -65,7 +65,8 @@ def all_objects(scene: Scene) -> AllObjects | None:
     masks = [m for m in masks if bool((m & scene.valid).any())]
     if not masks:
         return None
-    x_opt = reduce_map([object_box(m) for m in masks], scene.valid).reduction_union
+    x_opt = reduce_map([object_box(m) for m in masks], scene.valid, tolerance_px=0.0, tolerance_frac=0.0,
+                       tolerance_image=0.0).reduction_union
     return AllObjects(masks, scene.valid, x_opt)
 
 

@@ -123,7 +123,8 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         ``labels`` ``(H, W)``.
     """
     checks = cfg.min_purity > 0 or cfg.min_solidity > 0
-    tries = cfg.max_areas + (cfg.purity_candidates - 1 if checks else 0)
+    areas_max = cfg.max_areas if cfg.keep_ratio < 1 else 1  # a ratio of 1 keeps only the best
+    tries = areas_max + (cfg.purity_candidates - 1 if checks else 0)
     ranked = select_areas(areas, stats, replace(cfg, max_areas=tries))
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first = [], None
@@ -152,7 +153,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         if done.purity >= cfg.min_purity and done.solidity >= cfg.min_solidity:
             kept.append(done)
             taken[torch.tensor(done.neurons)] = True
-            if len(kept) == cfg.max_areas:
+            if len(kept) == areas_max:
                 break
     if not kept and first is not None and not cfg.fail_safe:
         kept = [first]

@@ -87,7 +87,10 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     if not bool(plausible.any()):
         return None
     pred = coef[:, 0:1] * pts[None, :, 0] + coef[:, 1:2] * pts[None, :, 1] + coef[:, 2:3]
-    score = ((pred - pts[None, :, 2]).abs() < tol).sum(1).masked_fill(~plausible, -1)
+    score = ((pred - pts[None, :, 2]).abs() < tol).sum(1).double()
+    if cfg.below_penalty > 0:  # a support surface hides what lies beneath it: points behind it are evidence against
+        score = score - cfg.below_penalty * (pts[None, :, 2] < pred - tol).sum(1).double()
+    score = score.masked_fill(~plausible, -float("inf"))
     best = coef[int(score.argmax())]
     # refine by least squares on the inliers of the lower half, then recompute on the full map
     inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
@@ -100,11 +103,39 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     ys = torch.arange(h, dtype=torch.float64)[:, None]
     xs = torch.arange(w, dtype=torch.float64)[None, :]
     mask = ok & ((a * xs + b * ys + c - disparity.double()).abs() < tol)
+    if cfg.slope_rows > 0:
+        mask &= _follows_slope(disparity, ok, b, tol, max(1, round(cfg.slope_rows * h)))
     frac = int(mask.sum()) / n_valid
     if frac < cfg.min_inlier_frac:
         return None
+    if cfg.max_below_frac < 1.0:  # share of the pixels where the plane is in view that lie behind it
+        plane = a * xs + b * ys + c
+        seen = ok & (plane > tol)
+        behind = seen & (disparity.double() < plane - tol)
+        if int(behind.sum()) > cfg.max_below_frac * max(int(seen.sum()), 1):
+            return None
     # ground is seen below the objects, not above them: few inliers in the top third of the image
     top = ok[: h // 3]
     if int(top.sum()) and int(mask[: h // 3].sum()) / int(top.sum()) > cfg.max_top_frac:
         return None
     return GroundPlane(a, b, c, tol, mask, frac)
+
+
+def _follows_slope(disparity: torch.Tensor, ok: torch.Tensor, b: float, tol: float, k: int) -> torch.Tensor:
+    """Pixels whose disparity rises down the image like the plane's (``b`` px per row), measured
+    over ``k`` rows above and below: ``|d(y+k) − d(y−k) − 2kb| < 2·tol``. A vertical surface (an object,
+    a chair leg) crossing the plane's band has ``∂d/∂y ≈ 0`` and fails; pixels without both
+    neighbours pass (the band alone decides there).
+
+    Shape:
+        ``disparity``, ``ok`` ``(H, W)`` → ``(H, W)`` bool.
+    """
+    h = disparity.shape[0]
+    out = torch.ones_like(ok)
+    if h <= 2 * k:
+        return out
+    d = disparity.double()
+    diff = d[2 * k:] - d[:-2 * k]  # (H − 2k, W): row y + k minus row y − k, centred on y
+    both = ok[2 * k:] & ok[:-2 * k]
+    out[k:h - k] = ~both | ((diff - 2 * k * b).abs() < 2 * tol)
+    return out

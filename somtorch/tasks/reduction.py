@@ -17,7 +17,10 @@ from dataclasses import dataclass, field
 
 import torch
 
+from ..config import ReductionConfig
 from ..validation import check_positive, check_tensor
+
+_R = ReductionConfig  # the defaults of reduce_map, declared once in somtorch.config
 
 Box = tuple[int, int, int, int]  # x0, y0, x1, y1 — inclusive pixel coordinates
 
@@ -72,8 +75,8 @@ def valid_integral(valid: torch.Tensor) -> torch.Tensor:
     return ii
 
 
-def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = 0.0,
-               tolerance_frac: float = 0.05, tolerance_image: float = 0.0,
+def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = _R.tolerance_px,
+               tolerance_frac: float = _R.tolerance_frac, tolerance_image: float = _R.tolerance_image,
                integral: torch.Tensor | None = None) -> Reduction:
     """Keep the pixels inside the (enlarged) boxes.
 

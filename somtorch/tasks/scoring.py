@@ -41,7 +41,8 @@ def object_box(mask: torch.Tensor) -> tuple[int, int, int, int]:
 
 def optimal_reduction(object_mask: torch.Tensor, valid: torch.Tensor) -> float:
     """x_opt: the reduction in % when exactly the object's bounding box is kept."""
-    return reduce_map([object_box(object_mask)], valid, tolerance_frac=0.0).reduction_union
+    return reduce_map([object_box(object_mask)], valid, tolerance_px=0.0, tolerance_frac=0.0,
+                      tolerance_image=0.0).reduction_union
 
 
 def score_reduction(reduction: Reduction, object_mask: torch.Tensor, valid: torch.Tensor,

@@ -21,7 +21,7 @@ def _object() -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def _score(boxes, obj, valid, **kw):
-    return score_reduction(reduce_map(boxes, valid, tolerance_frac=0.0), obj, valid, **kw)
+    return score_reduction(reduce_map(boxes, valid, tolerance_frac=0.0, tolerance_image=0.0), obj, valid, **kw)
 
 
 def test_identified_thresholds_at_100_and_95_percent():
@@ -54,7 +54,7 @@ def test_x_opt_is_the_reduction_of_the_exact_object_bbox_including_invalid_objec
     x_opt = optimal_reduction(obj, valid)
     in_box = int(valid[10:31, 5:40].sum())
     assert x_opt == pytest.approx(100 * (1 - in_box / int(valid.sum())))
-    assert x_opt == reduce_map([(5, 10, 39, 30)], valid, tolerance_frac=0.0).reduction_union
+    assert x_opt == reduce_map([(5, 10, 39, 30)], valid, tolerance_frac=0.0, tolerance_image=0.0).reduction_union
     assert _score([(0, 0, 1, 1)], obj, valid).x_opt == x_opt
 
 
@@ -94,7 +94,7 @@ def test_useful_factor_is_a_parameter():
 
 def test_a_known_x_opt_is_used_as_given():
     obj, valid = _object()
-    red = reduce_map([(5, 10, 39, 30)], valid, tolerance_frac=0.0)
+    red = reduce_map([(5, 10, 39, 30)], valid, tolerance_frac=0.0, tolerance_image=0.0)
     computed = score_reduction(red, obj, valid)
     assert score_reduction(red, obj, valid, x_opt=computed.x_opt) == computed
     assert score_reduction(red, obj, valid, x_opt=99.0).x_opt == 99.0
@@ -109,7 +109,7 @@ def test_score_as_dict_has_every_field():
 
 def test_scoring_rejects_an_object_without_valid_pixels_and_shape_mismatches():
     obj, valid = _object()
-    red = reduce_map([(0, 0, 5, 5)], valid)
+    red = reduce_map([(0, 0, 5, 5)], valid, tolerance_image=0.0)
     with pytest.raises(ValueError, match="no pixel with a valid disparity"):
         score_reduction(red, obj, valid & ~obj)
     with pytest.raises(ValueError, match="same shape"):
