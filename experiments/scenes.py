@@ -72,4 +72,5 @@ def load_dev_scene(spec: SceneSpec, data_dir: str | Path) -> Any:
         im = read_image(path / f)  # (3, H, W) RGB uint8
         images.append(im.permute(1, 2, 0).numpy()[..., ::-1].copy())  # BGR, as OpenCV reads it
     disp, valid = compute_disparity(images[0], images[1], SGBMParams(numDisparities=spec.ndisp))
-    return scene_from_arrays(disp, valid, objects=gt.objects, object_info=gt.object_info, name=spec.name)
+    return scene_from_arrays(disp, valid, image=gt.image, objects=gt.objects, object_info=gt.object_info,
+                             camera=gt.camera, name=spec.name)

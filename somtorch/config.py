@@ -148,6 +148,8 @@ class FeatureConfig(Validated):
         d_weight: weight of the disparity feature (2 = disparity counts twice as much as position).
         train_stride: 1 = NOR (train on every valid pixel), 10 = OR (every 10th pixel in y and x,
             the paper's runtime-optimised mode); the whole map is always segmented.
+        color_weight: append the left image's Y, Cb, Cr (each in [0, 1]) times this weight to
+            every pixel vector (0 = off; needs the scene's image).
         speckle_frac: remove image-connected speckles of similar disparity smaller than this share
             of the pixels before anything else (OpenCV ``filterSpeckles``; 0 = off).
     """
@@ -155,11 +157,13 @@ class FeatureConfig(Validated):
     _group: ClassVar[str] = "features"
     _constraints: ClassVar[dict[str, Any]] = {
         "normalize": Choice("somtorch.disparity.features:NORMALIZATIONS"),
-        "d_weight": POSITIVE, "train_stride": POSITIVE_INT, "speckle_frac": Interval(0, 1),
+        "d_weight": POSITIVE, "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
+        "speckle_frac": Interval(0, 1),
     }
 
     normalize: str = "image"
     d_weight: float = 2.0
+    color_weight: float = 0.0
     train_stride: int = 10
     speckle_frac: float = 0.0
 
@@ -316,6 +320,9 @@ class AreaConfig(Validated):
         select: ``"nearest"`` (largest mean disparity, the paper's), ``"salient"`` (ranked by
             contrast to the surrounding segments × ``area_frac ** size_power``) or ``"all"``.
         size_power: weight of the area's size in the salient ranking (0 = contrast alone).
+        color_rank: with colour features, an area's salience is its contrast plus
+            ``color_rank ×`` the disparity spread × its colour distance to its surroundings
+            (Y, Cb, Cr in [0, 1]; 0 = disparity contrast only).
         min_contrast: salient: minimum contrast as a share of the disparity spread.
         max_area_frac, min_area_frac: size limits as shares of the segmented pixels.
         max_areas: how many areas are kept at most.
@@ -348,7 +355,7 @@ class AreaConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice("somtorch.tasks.objects:LINKS"),
         "spread": Choice("somtorch.tasks.objects:SPREADS"), "min_boundary": NON_NEGATIVE,
-        "size_power": NON_NEGATIVE, "grow": BOOL, "grow_stride": POSITIVE_INT,
+        "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "grow": BOOL, "grow_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
@@ -367,6 +374,7 @@ class AreaConfig(Validated):
     spread: str = "robust"
     min_boundary: float = 0.1
     size_power: float = 0.25
+    color_rank: float = 0.0
     grow: bool = False
     grow_stride: int = 2
     box_coverage: float = 0.99

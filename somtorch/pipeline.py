@@ -97,8 +97,9 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None
         ground = fit_ground_plane(scene.disparity, valid, cfg.ground)
     with timer("features"):
         usable = valid if ground is None else valid & ~ground.mask
-        feats = make_features(scene.disparity, usable, normalize=cfg.features.normalize,
-                              d_weight=cfg.features.d_weight)
+        f = cfg.features
+        feats = make_features(scene.disparity, usable, normalize=f.normalize, d_weight=f.d_weight,
+                              image=scene.image if f.color_weight > 0 else None, color_weight=f.color_weight)
         train = feats.subsample(cfg.features.train_stride)
         if len(train) == 0:
             raise ValueError(f"features.train_stride={cfg.features.train_stride} leaves no valid pixel of "
@@ -120,7 +121,8 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
     members = []
     for e in range(seg.labels.shape[0]):
         with timer("objects"):
-            found = find_objects(seg.labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, cfg.objects)
+            found = find_objects(seg.labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, cfg.objects,
+                                 None if seg.ref_color is None else seg.ref_color[e])
         with timer("reduction"):
             red = reduce_map([a.box for a in found.kept], scene.valid, tolerance_px=r.tolerance_px,
                              tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image,

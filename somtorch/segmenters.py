@@ -41,6 +41,8 @@ class Segmentation:
         prototypes: feature-space centres ``(E, K, D)`` (SOM weights, k-means centres) or None.
         som: the trained maps (``"som"`` / ``"minisom"``) or None.
         seeds: the seed of each member.
+        ref_color: reference colour (Y, Cb, Cr in [0, 1]) of each segment ``(E, K, 3)`` when the
+            features carry colour, else None.
     """
 
     labels: torch.Tensor
@@ -49,6 +51,7 @@ class Segmentation:
     prototypes: torch.Tensor | None
     som: SOM | None
     seeds: list[int]
+    ref_color: torch.Tensor | None = None
 
     @property
     def num_segments(self) -> int:
@@ -79,19 +82,20 @@ def register(name: str, *, deterministic: bool = False, has_grid: bool = False) 
 def _from_prototypes(weight: torch.Tensor, feats: Features, grid_d2: torch.Tensor | None, som: SOM | None,
                      seeds: list[int]) -> Segmentation:
     """A segmentation whose pixels are labelled later (by :func:`run_segmenter`, timed apart)."""
-    ref_d = feats.to_pixel_units(weight)[..., 2]  # (E, K) px
-    return Segmentation(None, ref_d, grid_d2, weight, som, seeds)  # type: ignore[arg-type]
+    units = feats.to_pixel_units(weight)  # (E, K, D): y px, x px, d px[, Y, Cb, Cr]
+    ref_c = units[..., 3:6] if units.shape[-1] >= 6 else None
+    return Segmentation(None, units[..., 2], grid_d2, weight, som, seeds, ref_c)  # type: ignore[arg-type]
 
 
-def _new_som(cfg: PipelineConfig, runs: int) -> SOM:
+def _new_som(cfg: PipelineConfig, runs: int, dim: int) -> SOM:
     s = cfg.som
-    return SOM(s.rows, s.cols, 3, ensemble=runs, topology=s.topology, toroidal=s.toroidal, seed=cfg.seed)
+    return SOM(s.rows, s.cols, dim, ensemble=runs, topology=s.topology, toroidal=s.toroidal, seed=cfg.seed)
 
 
 @register("som", has_grid=True)
 def _som(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg: PipelineConfig, runs: int,
          progress: bool, log_training: Callable[[str, float, int], Any] | None) -> Segmentation:
-    som, tc = _new_som(cfg, runs), cfg.train
+    som, tc = _new_som(cfg, runs, train.x.shape[-1]), cfg.train
     callback = None
     if log_training is not None:
         def callback(info: StepInfo) -> None:
@@ -114,7 +118,7 @@ def _minisom(feats: Features, train: Features, scene: Any, usable: torch.Tensor,
     if tc.mode != "online":
         raise ValueError(f"method='minisom' trains with MiniSom's online rule; got train.mode={tc.mode!r} "
                          "(use train=online)")
-    som = _new_som(cfg, runs)
+    som = _new_som(cfg, runs, train.x.shape[-1])
     som.weight = train_minisom(train.x, s.rows, s.cols, seeds=som.seeds, epochs=tc.epochs, sigma=tc.sigma,
                                lr=tc.lr, order=tc.order, neighborhood=tc.neighborhood,
                                init="pca" if s.init == "pca" else "sample").to(som.weight)

@@ -82,7 +82,8 @@ class Features:
 
 
 def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: str = _F.normalize,
-                  d_weight: float = _F.d_weight, dtype: torch.dtype = torch.float32) -> Features:
+                  d_weight: float = _F.d_weight, image: torch.Tensor | None = None,
+                  color_weight: float = _F.color_weight, dtype: torch.dtype = torch.float32) -> Features:
     """Turn the valid pixels of a disparity map into scaled (y, x, d) vectors, row-major order.
 
     Args:
@@ -90,10 +91,15 @@ def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: st
         valid: validity mask ``(H, W)`` bool; negative and non-finite disparities are dropped too.
         normalize: ``"image"``, ``"minmax"`` or ``"none"`` (module docstring).
         d_weight: weight of the disparity axis relative to the image axes.
+        image: the left image ``(3, H, W)`` RGB uint8; with ``color_weight > 0`` its Y, Cb, Cr
+            (ITU-R BT.601, each in [0, 1]) times ``color_weight`` are appended (the paper's "YIQ
+            or YCbCr colour models" future work).
+        color_weight: weight of the colour features (0 = off: (y, x, d) only).
         dtype: floating dtype of the vectors.
 
     Shape:
-        returns :class:`Features` with ``x`` ``(N, 3)``, N = number of usable pixels.
+        returns :class:`Features` with ``x`` ``(N, 3)`` — or ``(N, 6)`` with colour —, N = number
+        of usable pixels.
 
     Raises:
         ValueError: no usable pixel, shapes disagree, unknown ``normalize``.
@@ -128,7 +134,29 @@ def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: st
             offset = torch.tensor([y_lo, x_lo, d_lo], dtype=torch.float64)
             span = torch.tensor([y_hi - y_lo, x_hi - x_lo, d_span], dtype=torch.float64).clamp_min(1e-6)
             scale = torch.tensor([1.0, 1.0, d_weight], dtype=torch.float64) / span
-    feats = torch.empty(n, 3, dtype=dtype)
-    for j, col in enumerate((yx[:, 0], yx[:, 1], d)):  # column-wise: no (N, 3) float64 temporaries
+    check_positive("color_weight", color_weight, allow_zero=True)
+    cols = [yx[:, 0], yx[:, 1], d]
+    if color_weight > 0:
+        if image is None:
+            raise ValueError("color_weight > 0 needs the left image (the scene has none): set color_weight=0")
+        check_tensor("image", image, ndim=3, dtype=torch.uint8)
+        if tuple(image.shape) != (3, h, w):
+            raise ValueError(f"image has shape {tuple(image.shape)}; (3, {h}, {w}) expected")
+        cols += list(ycbcr(image[:, usable]))
+        offset = torch.cat([offset, torch.zeros(3, dtype=torch.float64)])
+        scale = torch.cat([scale, torch.full((3,), float(color_weight), dtype=torch.float64)])
+    feats = torch.empty(n, len(cols), dtype=dtype)
+    for j, col in enumerate(cols):  # column-wise: no (N, D) float64 temporaries
         torch.mul(col.to(dtype) - float(offset[j]), float(scale[j]), out=feats[:, j])
     return Features(feats, yx, offset.to(dtype), scale.to(dtype), (h, w), h * w - n, 1, usable)
+
+
+def ycbcr(rgb: torch.Tensor) -> torch.Tensor:
+    """ITU-R BT.601 Y, Cb, Cr of uint8 RGB values, each in [0, 1].
+
+    Shape:
+        ``rgb`` ``(3, ...)`` → ``(3, ...)`` float64.
+    """
+    r, g, b = (c.double() / 255.0 for c in rgb)
+    y = 0.299 * r + 0.587 * g + 0.114 * b
+    return torch.stack([y, 0.5 + (b - y) / 1.772, 0.5 + (r - y) / 1.402])

@@ -77,21 +77,23 @@ class ObjectResult:
 
 
 def rank_score(area: ObjectArea, cfg: AreaConfig) -> float:
-    """The salient ranking's score: ``contrast × area_frac ** size_power``."""
-    return area.contrast * area.area_frac ** cfg.size_power
+    """The salient ranking's score: ``salience × area_frac ** size_power`` (salience = contrast
+    plus the optional colour term)."""
+    return area.ranking * area.area_frac ** cfg.size_power
 
 
 def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
-                 ctx: MapContext, cfg: AreaConfig | None = None) -> ObjectResult:
+                 ctx: MapContext, cfg: AreaConfig | None = None,
+                 ref_color: torch.Tensor | None = None) -> ObjectResult:
     """Step 1c on one member (see the module docstring).
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 not segmented); ``ref_disparity`` ``(K,)`` px;
-        ``grid_d2`` ``(K, K)`` or None.
+        ``grid_d2`` ``(K, K)`` or None; ``ref_color`` ``(K, 3)`` Y, Cb, Cr or None.
     """
     cfg = cfg or AreaConfig()
     stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread)
-    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
+    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, ref_color)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:
         return ObjectResult(stats, areas, kept)

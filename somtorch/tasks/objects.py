@@ -78,6 +78,7 @@ class ObjectArea:
     contrast: float
     area_frac: float
     rank: int = -1
+    salience: float | None = None  # contrast plus the colour term (px); None = the contrast alone
     segment_box: tuple[int, int, int, int] | None = None  # box of all its segments' pixels, before refinement
     merged_segments: int = 0  # segments joined by merge_adjacent
     ground_clutter_pieces: int = 0  # pieces left out of the box as ground clutter
@@ -85,6 +86,11 @@ class ObjectArea:
     purity: float | None = None  # share of the box's valid pixels that are the area's own
     solidity: float | None = None  # opened share of its pixels relative to the map's
     confidence: float | None = None  # rank score relative to the best candidate's (1 = best)
+
+    @property
+    def ranking(self) -> float:
+        """What the salient selection ranks by (before the size term): the salience, or the contrast."""
+        return self.contrast if self.salience is None else self.salience
 
     def mask(self, labels: torch.Tensor) -> torch.Tensor:
         """The area's pixels: the union of its neurons' segments. ``labels`` ``(H, W)`` → ``(H, W)`` bool."""
@@ -171,7 +177,7 @@ def _components(adj: torch.Tensor) -> list[list[int]]:
 
 
 def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None, stats: NeuronStats,
-                      cfg: AreaConfig | None = None) -> list[ObjectArea]:
+                      cfg: AreaConfig | None = None, ref_color: torch.Tensor | None = None) -> list[ObjectArea]:
     """All object areas of one SOM (connected components of similar, grid-adjacent neurons).
 
     Args:
@@ -181,6 +187,10 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
             image only, whatever ``cfg.link`` says.
         stats: :func:`neuron_stats` of the member's label map.
         cfg: recognition parameters.
+        ref_color: reference colour (Y, Cb, Cr in [0, 1]) of each neuron ``(K, 3)``, or None; with
+            ``cfg.color_rank > 0`` an area's salience adds ``color_rank × spread ×`` the distance
+            between its colour and its surroundings' (boundary-weighted), so an object with little
+            depth contrast but a colour of its own can rank.
 
     Returns:
         areas with at least one pixel, in no particular order (see :func:`select_areas`).
@@ -212,6 +222,13 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
     border = (onehot @ stats.boundary) * (1.0 - onehot)  # (C, K) boundary with the segments outside
     b_len = border.sum(1)
     contrast = torch.where(b_len > 0, mean - (border @ md) / b_len.clamp_min(1e-300), torch.zeros_like(mean))
+    salience = contrast.clone()
+    if ref_color is not None and cfg.color_rank > 0:
+        rc = ref_color.double().cpu()  # (K, 3)
+        own_c = (onehot @ (rc * cnt[:, None])) / n_px.clamp_min(1.0)[:, None]  # (C, 3)
+        around_c = (border @ rc) / b_len.clamp_min(1e-300)[:, None]
+        c_con = torch.where(b_len > 0, (own_c - around_c).norm(dim=1), torch.zeros_like(mean))
+        salience = salience + cfg.color_rank * stats.spread(cfg.spread) * c_con
     nonempty = stats.count > 0
     big = torch.iinfo(torch.long).max
     x0 = torch.full((len(comps),), big).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 0], "amin")
@@ -225,7 +242,7 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
         if n == 0:
             continue
         areas.append(ObjectArea(comp, int(n), (int(x0[i]), int(y0[i]), int(x1[i]), int(y1[i])), float(mean[i]),
-                                float(contrast[i]), n / total))
+                                float(contrast[i]), n / total, salience=float(salience[i])))
     return areas
 
 
@@ -238,7 +255,7 @@ def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | 
         ok = [a for a in areas if cfg.min_area_frac <= a.area_frac <= cfg.max_area_frac]
         if cfg.select == "salient":
             ok = [a for a in ok if a.contrast >= cfg.min_contrast * stats.spread(cfg.spread)]
-            ranked = sorted(ok, key=lambda a: -a.contrast * a.area_frac ** cfg.size_power)
+            ranked = sorted(ok, key=lambda a: -a.ranking * a.area_frac ** cfg.size_power)
         else:
             ranked = sorted(ok, key=lambda a: -a.mean_disparity)
         ranked = ranked[:cfg.max_areas]

@@ -199,3 +199,21 @@ def test_bad_shapes_and_dtypes_are_rejected_with_named_arguments():
         make_features(ok_d, ok_v, d_weight=0.0)
     with pytest.raises(ValueError, match="d_weight"):
         make_features(ok_d, ok_v, d_weight=float("nan"))
+
+
+def test_colour_features_append_ycbcr_times_their_weight():
+    from somtorch.disparity.features import ycbcr
+
+    d = torch.full((4, 5), 10.0)
+    d[0, 0] = 20.0
+    valid = torch.ones(4, 5, dtype=torch.bool)
+    image = torch.zeros(3, 4, 5, dtype=torch.uint8)
+    image[0] = 255  # pure red
+    f = make_features(d, valid, image=image, color_weight=2.0)
+    assert f.x.shape == (20, 6)
+    y, cb, cr = ycbcr(torch.tensor([[255], [0], [0]], dtype=torch.uint8))[:, 0].tolist()
+    assert f.x[0, 3:].tolist() == pytest.approx([2 * y, 2 * cb, 2 * cr], abs=1e-6)
+    assert f.to_pixel_units(f.x)[0, 3:].tolist() == pytest.approx([y, cb, cr], abs=1e-6)
+    assert torch.equal(f.x[:, :3], make_features(d, valid).x)  # (y, x, d) unchanged
+    with pytest.raises(ValueError, match="needs the left image"):
+        make_features(d, valid, color_weight=1.0)
