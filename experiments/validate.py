@@ -51,6 +51,7 @@ class ValidateConfig(RunConfig):
     scenes: Optional[list[str]] = None
     grid: dict[str, list[Any]] = field(default_factory=dict)
     gallery: Optional[str] = None  # a folder: one picture of member 0 per scene (defaults)
+    min_gain: float = 0.02  # a value replaces the default only if it gains > min_gain x the runs
 
 
 def _key(overrides: dict[str, Any]) -> str:
@@ -144,18 +145,23 @@ class SceneCache:
         return path
 
 
-def choose(caches: list[SceneCache], grid: dict[str, list[Any]], defaults: dict[str, Any]) -> dict[str, Any]:
+def choose(caches: list[Any], grid: dict[str, list[Any]], defaults: dict[str, Any], min_gain: float = 0.0
+           ) -> dict[str, Any]:
     """Each constant's value with the most useful hits (then all-objects hits) summed over ``caches``,
-    the others at their default; the default wins ties. Returns only the changed constants."""
+    the others at their default. A value replaces the default only if it gains more than
+    ``min_gain ×`` the runs of ``caches`` in useful hits (0: any gain; ties keep the default).
+    Returns only the changed constants."""
     picked: dict[str, Any] = {}
     for k, values in grid.items():
         def total(v: Any) -> tuple[int, int]:
             rows = [c.score(_overrides(k, v, defaults)) for c in caches]
             return sum(r["useful_hits"] for r in rows), sum(r["all_objects_hits"] for r in rows)
-        best_v, best = defaults[k], total(defaults[k])
+        base = total(defaults[k])
+        margin = min_gain * sum(c.score({}).get("runs", 0) for c in caches)
+        best_v, best = defaults[k], base
         for v in values:
             t = total(v)
-            if t > best:
+            if t > best and t[0] - base[0] > margin:
                 best_v, best = v, t
         picked.update(_overrides(k, best_v, defaults))
     return picked
@@ -201,15 +207,18 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
                 c.score(_overrides(k, v, defaults))
         log.info("%s: default %d useful of %d (%.1f s)", c.spec.name, c.scores["default"]["useful_hits"],
                  c.scores["default"]["runs"], time.perf_counter() - t0)
-    in_sample = choose(caches, grid, defaults)
+    in_sample = choose(caches, grid, defaults, cfg.min_gain)
     rows = []
     for i, c in enumerate(caches):
-        fold = choose(caches[:i] + caches[i + 1:], grid, defaults)
+        others = caches[:i] + caches[i + 1:]
+        fold = choose(others, grid, defaults, cfg.min_gain)
+        strict = choose(others, grid, defaults, 0.0)
         rows.append({"scene": c.spec.name, "computed": c.spec.computed, "default": c.score({}),
-                     "in_sample": c.score(in_sample), "left_out": c.score(fold), "fold_choice": fold})
+                     "in_sample": c.score(in_sample), "left_out": c.score(fold), "fold_choice": fold,
+                     "left_out_strict": c.score(strict), "fold_choice_strict": strict})
     totals = {part: {m: sum(r[part][m] for r in rows) for m in ("runs", "useful_hits", "all_objects_hits",
                                                                   "identified_95", "no_object")}
-              for part in ("default", "in_sample", "left_out")}
+              for part in ("default", "in_sample", "left_out", "left_out_strict")}
     if cfg.gallery is not None:
         for c in caches:
             c.gallery(Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
@@ -219,18 +228,20 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
 
 def to_markdown(report: dict[str, Any]) -> str:
     """The left-out table: per scene default / in-sample / left-out useful and all-objects hits."""
-    out = ["| scene | runs | default useful | in-sample useful | **left-out useful** | default all-obj | "
-           "left-out all-obj | ground ∩ objects | left-out choice |", "|---|---|---|---|---|---|---|---|---|"]
+    out = ["| scene | runs | default useful | in-sample useful | **left-out useful** | left-out, any gain | "
+           "default all-obj | left-out all-obj | no object | ground ∩ objects | left-out choice |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in report["rows"]:
-        d, i, lo = r["default"], r["in_sample"], r["left_out"]
+        d, i, lo, st = r["default"], r["in_sample"], r["left_out"], r["left_out_strict"]
         choice = ", ".join(f"{k}={v}" for k, v in r["fold_choice"].items()) or "defaults"
         out.append(f"| {r['scene']} | {d['runs']} | {d['useful_hits']} | {i['useful_hits']} | **{lo['useful_hits']}** | "
-                   f"{d['all_objects_hits']} | {lo['all_objects_hits']} | {d['ground_object_frac']:.1%} | {choice} |")
+                   f"{st['useful_hits']} | {d['all_objects_hits']} | {lo['all_objects_hits']} | {d['no_object']} | "
+                   f"{d['ground_object_frac']:.1%} | {choice} |")
     t = report["totals"]
     out.append(f"| **total** | {t['default']['runs']} | {t['default']['useful_hits']} | {t['in_sample']['useful_hits']} | "
-               f"**{t['left_out']['useful_hits']}** | {t['default']['all_objects_hits']} | "
-               f"{t['left_out']['all_objects_hits']} | | in-sample choice: "
-               f"{', '.join(f'{k}={v}' for k, v in report['in_sample_choice'].items()) or 'defaults'} |")
+               f"**{t['left_out']['useful_hits']}** | {t['left_out_strict']['useful_hits']} | "
+               f"{t['default']['all_objects_hits']} | {t['left_out']['all_objects_hits']} | {t['default']['no_object']} | | "
+               f"in-sample choice: {', '.join(f'{k}={v}' for k, v in report['in_sample_choice'].items()) or 'defaults'} |")
     out += ["", "Useful hits per candidate (one constant changed):", "",
             "| candidate | " + " | ".join(r["scene"] for r in report["rows"]) + " | total |",
             "|---" * (len(report["rows"]) + 2) + "|"]

@@ -386,8 +386,8 @@ class AreaConfig(Validated):
     solidity_size: float = 0.02
     purity_candidates: int = 5
     select: str = "salient"
-    max_areas: int = 1
-    keep_ratio: float = 0.5
+    max_areas: int = 2
+    keep_ratio: float = 0.75
     fail_safe: bool = True
     min_contrast: float = 0.02
     max_area_frac: float = 0.7

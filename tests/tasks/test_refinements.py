@@ -178,10 +178,10 @@ def test_kept_areas_skips_a_speckle_area_whose_box_is_mostly_other_pixels():
     off = kept_areas(areas, stats, labels, AreaConfig(min_purity=0.0, min_solidity=0.0), ctx)
     assert [a.neurons for a in off] == [[2]] and off[0].purity < 0.05 and off[0].confidence == 1.0
     # a single candidate allowed: nothing passes, so the best-ranked one is kept anyway ...
-    cfg = AreaConfig(purity_candidates=1, fail_safe=False)
+    cfg = AreaConfig(purity_candidates=1, max_areas=1, fail_safe=False)
     assert [a.neurons for a in kept_areas(areas, stats, labels, cfg, ctx)] == [[2]]
     # ... or, fail-safe, nothing, and find_objects keeps the whole map and flags it
-    cfg = AreaConfig(purity_candidates=1, fail_safe=True)
+    cfg = AreaConfig(purity_candidates=1, max_areas=1, fail_safe=True)
     assert kept_areas(areas, stats, labels, cfg, ctx) == []
     found = find_objects(labels, torch.tensor([10.0, 40.0, 90.0]), None, ctx, cfg)
     assert found.no_object and len(found.kept) == 1
@@ -201,8 +201,9 @@ def test_kept_areas_keeps_further_areas_by_their_score_relative_to_the_best():
     stats = neuron_stats(labels, disp, 3)
     areas = find_object_areas(torch.tensor([10.0, 40.0, 38.0]), None, stats, AreaConfig())
     ctx = _ctx(labels, disp)
-    one = kept_areas(areas, stats, labels, AreaConfig(), ctx)
+    one = kept_areas(areas, stats, labels, AreaConfig(max_areas=1), ctx)
     assert [a.neurons for a in one] == [[1]]
+    assert [a.neurons for a in kept_areas(areas, stats, labels, AreaConfig(), ctx)] == [[1], [2]]  # the default
     two = kept_areas(areas, stats, labels, AreaConfig(max_areas=2, keep_ratio=0.5), ctx)
     assert [a.neurons for a in two] == [[1], [2]] and [a.rank for a in two] == [0, 1]
     assert two[0].confidence == 1.0 and 0.5 <= two[1].confidence < 1.0
