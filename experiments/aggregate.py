@@ -30,7 +30,7 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-from experiments.study import SCHEMA, config_hash
+from experiments.metrics_schema import SCHEMA, config_hash
 
 log = logging.getLogger("somtorch.aggregate")
 

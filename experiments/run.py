@@ -15,7 +15,6 @@ Examples::
 from __future__ import annotations
 
 import logging
-import os
 import shutil
 import tempfile
 import time
@@ -70,7 +69,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     """
     import torch
 
-    from somtorch.atomic import write_json
+    from somtorch.atomic import commit_staged, write_json
     from somtorch.outputs import summarize, write_maps, write_point_clouds
     from somtorch.pipeline import run_pipeline
 
@@ -109,12 +108,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
             writer = None
         metrics["timings_s"]["total"] = time.perf_counter() - t_start
         write_json(stage / "metrics.json", metrics)
-        entries = sorted(stage.iterdir(), key=lambda p: p.name == "metrics.json")
-        for entry in entries:  # metrics.json last: its presence marks a complete run
-            target = out_dir / entry.name
-            if target.is_dir():
-                shutil.rmtree(target)
-            os.replace(entry, target)
+        commit_staged(stage, out_dir)  # metrics.json last: its presence marks a complete run
     finally:
         if writer is not None:
             writer.close()

@@ -23,7 +23,6 @@ same command skips every job whose ``metrics.json`` is complete and was made by 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import logging
 import os
@@ -42,12 +41,12 @@ from omegaconf import DictConfig, OmegaConf
 
 from experiments.run import CONF_DIR, load_input
 from experiments.schema import RunConfig, register
+from experiments.metrics_schema import SCHEMA, config_hash
 from somtorch.evaluation import merge_runs, per_object_scores, run_records, summarize_runs
 
 log = logging.getLogger("somtorch.study")
 register()
 EXECUTIONS = ("ensemble", "separate")
-SCHEMA = "somtorch.study/1"
 
 
 @dataclass
@@ -83,15 +82,6 @@ class StudyConfig(RunConfig):
 ConfigStore.instance().store(name="study_schema", node=StudyConfig)
 
 # keys that do not change a job's results (where files go, whether to skip)
-_UNHASHED = ("paths", "output", "skip_complete", "study", "repeats")
-
-
-def config_hash(config: dict[str, Any]) -> str:
-    """SHA-256 of the result-relevant part of a resolved config (stable key order)."""
-    relevant = {k: v for k, v in config.items() if k not in _UNHASHED}
-    return hashlib.sha256(json.dumps(relevant, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
 def complete_metrics(path: Path, chash: str) -> dict | None:
     """The metrics of a finished job in ``path`` made by the config with hash ``chash``, else None."""
     f = path / "metrics.json"
@@ -109,7 +99,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
     import torch
 
     from somtorch import __version__
-    from somtorch.atomic import write_json
+    from somtorch.atomic import commit_staged, write_json
     from somtorch.disparity.resize import resize_scene
     from somtorch.outputs import write_maps
     from somtorch.pipeline import run_pipeline
@@ -188,11 +178,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
             _tensorboard(stage, cfg, metrics)
         metrics["wall_s"] = time.perf_counter() - t_start
         write_json(stage / "metrics.json", metrics)
-        for entry in sorted(stage.iterdir(), key=lambda p: p.name == "metrics.json"):
-            target = out_dir / entry.name  # metrics.json last: its presence marks a complete job
-            if target.is_dir():
-                shutil.rmtree(target)
-            os.replace(entry, target)
+        commit_staged(stage, out_dir)  # metrics.json last: its presence marks a complete job
     finally:
         shutil.rmtree(stage, ignore_errors=True)
     s = metrics["summary"]

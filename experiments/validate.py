@@ -117,13 +117,14 @@ class SceneCache:
         m = detect(self.scene, seg, ground, cfg)[member]
         sc = self.scene
         d = np.where(sc.valid.numpy(), sc.disparity.numpy(), np.nan)
-        fig, ax = plt.subplots(figsize=(7.5, 7.5 * sc.height / sc.width + 0.8), dpi=80)
+        fig, ax = plt.subplots(figsize=(7.5, 7.5 * sc.height / sc.width + 0.8), dpi=64)
         lo, hi = np.nanpercentile(d, [1, 99])
         im = ax.imshow(d, cmap="turbo", vmin=lo, vmax=hi)
         fig.colorbar(im, ax=ax, fraction=0.03, pad=0.01, label="disparity [px]")
         if ground is not None:
-            ax.imshow(np.ma.masked_where(~ground.mask.numpy(), np.ones(ground.mask.shape)), cmap="Blues",
-                      vmin=0, vmax=1.5, alpha=0.6)
+            tint = np.zeros((*ground.mask.shape, 4))
+            tint[ground.mask.numpy()] = (0.15, 0.35, 1.0, 0.7)  # RGBA: the removed ground plane
+            ax.imshow(tint)
         if sc.objects is not None:
             ax.contour((sc.objects > 0).numpy().astype(float), levels=[0.5], colors="lime", linewidths=1.2)
         for a, b in zip(m.kept, m.reduction.boxes):

@@ -47,3 +47,17 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 def write_json(path: str | os.PathLike, obj: Any) -> Path:
     """Atomically write ``obj`` as indented JSON (NaN/inf rejected, so the file is valid JSON)."""
     return write_bytes(path, (json.dumps(obj, indent=2, sort_keys=True, allow_nan=False) + "\n").encode())
+
+
+def commit_staged(stage: str | os.PathLike, out_dir: str | os.PathLike, last: str = "metrics.json") -> None:
+    """Move every entry of the staging folder ``stage`` into ``out_dir``, ``last`` last: its presence
+    marks a complete result, so a run killed half-way never looks complete. Existing entries of the
+    same name are replaced."""
+    import shutil
+
+    out = Path(out_dir)
+    for entry in sorted(Path(stage).iterdir(), key=lambda p: p.name == last):
+        target = out / entry.name
+        if target.is_dir():
+            shutil.rmtree(target)
+        os.replace(entry, target)

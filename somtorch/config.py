@@ -389,7 +389,7 @@ class AreaConfig(Validated):
     max_areas: int = 2
     keep_ratio: float = 0.75
     fail_safe: bool = True
-    min_contrast: float = 0.02
+    min_contrast: float = 0.0
     max_area_frac: float = 0.7
     min_area_frac: float = 0.01
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass
+
 from pathlib import Path
 from typing import Any
 
@@ -18,12 +18,11 @@ import numpy as np
 
 from . import viz
 from .atomic import atomic_path
-from .config import OutputConfig
+from .config import OutputConfig  # noqa: F401  (re-exported: the output group's schema)
 from .evaluation import summary_stats
 from .disparity.scene import Scene
 from .pipeline import PipelineResult
 from .tasks.segmentation import color_map, grey_map
-from .validation import check_choice, check_positive
 
 log = logging.getLogger(__name__)
 

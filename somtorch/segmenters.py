@@ -88,8 +88,7 @@ def _from_prototypes(weight: torch.Tensor, feats: Features, grid_d2: torch.Tenso
 
 
 def _new_som(cfg: PipelineConfig, runs: int, dim: int) -> SOM:
-    s = cfg.som
-    return SOM(s.rows, s.cols, dim, ensemble=runs, topology=s.topology, toroidal=s.toroidal, seed=cfg.seed)
+    return SOM.from_config(cfg.som, dim, ensemble=runs, seed=cfg.seed)
 
 
 @register("som", has_grid=True)

@@ -338,6 +338,14 @@ class SOM(nn.Module):
         return checkpoint.save(self, path)
 
     @classmethod
+    def from_config(cls, cfg: SOMConfig, dim: int, *, ensemble: int = 1, seed: int = 0,
+                    device: str | torch.device | None = None) -> SOM:
+        """The untrained maps a :class:`~somtorch.config.SOMConfig` describes (``init`` is applied
+        by :meth:`fit`); ``SOM.load`` reads the same hyper-parameters back from a checkpoint."""
+        return cls(cfg.rows, cfg.cols, dim, ensemble=ensemble, topology=cfg.topology, toroidal=cfg.toroidal,
+                   seed=seed, device=device)
+
+    @classmethod
     def load(cls, path: str | os.PathLike, *, device: str | torch.device | None = None) -> SOM:
         """Rebuild a map saved with :meth:`save`."""
         return checkpoint.load(cls, path, device=device)

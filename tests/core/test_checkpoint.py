@@ -89,3 +89,16 @@ def test_existing_file_with_another_suffix_is_data_file_error(tmp_path):
     path.write_bytes(b"PK\x03\x04 a torch zip pickle, not safetensors")
     with pytest.raises(DataFileError, match="model.pt"):
         SOM.load(path)
+
+
+def test_from_config_builds_what_the_config_describes_and_survives_a_checkpoint(tmp_path):
+    from somtorch.config import SOMConfig
+
+    cfg = SOMConfig(rows=4, cols=5, topology="hexagonal", toroidal=True)
+    som = SOM.from_config(cfg, 3, ensemble=2, seed=4)
+    assert (som.rows, som.cols, som.dim, som.ensemble, som.topology, som.toroidal) == (4, 5, 3, 2, "hexagonal", True)
+    som.fit(torch.rand(50, 3), epochs=2, progress=False)
+    som.save(tmp_path / "m.safetensors")
+    back = SOM.load(tmp_path / "m.safetensors")
+    assert (back.rows, back.cols, back.topology, back.toroidal) == (cfg.rows, cfg.cols, cfg.topology, cfg.toroidal)
+    assert torch.equal(back.weight, som.weight)
