@@ -20,6 +20,11 @@ class SceneSpec:
     ``disparity``: ``"gt"`` (the folder's own map), a file name in the folder (e.g. KITTI's
     ``disp_est.png``), or ``"sgbm"``: computed from ``left`` / ``right`` with our default SGBM and
     ``ndisp`` disparities. The folder's object masks score every variant.
+
+    ``junk``: a synthetic failure class added to the map (see :func:`add_junk`): ``"border"`` (a
+    band of speckles along the top and left borders at the main object's disparity, as SGBM leaves
+    where the other view has no match), ``"specks"`` (isolated 2×2 specks near the object, also at
+    its disparity) or ``"resample:F"`` (the map resampled by the factor F).
     """
 
     name: str
@@ -28,10 +33,11 @@ class SceneSpec:
     left: Optional[str] = None
     right: Optional[str] = None
     ndisp: int = 128
+    junk: Optional[str] = None
 
     @property
     def computed(self) -> bool:
-        return self.disparity != "gt"
+        return self.disparity != "gt" or self.junk is not None
 
 
 def dev_scenes(names: list[str] | None = None) -> list[SceneSpec]:
@@ -51,15 +57,22 @@ def dev_scenes(names: list[str] | None = None) -> list[SceneSpec]:
 
 def load_dev_scene(spec: SceneSpec, data_dir: str | Path) -> Any:
     """The :class:`~somtorch.disparity.scene.Scene` of ``spec`` with the folder's object masks."""
+    scene = _load(spec, Path(data_dir))
+    return add_junk(scene, spec.junk, seed=sum(map(ord, spec.name))) if spec.junk else scene
+
+
+def _load(spec: SceneSpec, data_dir: Path) -> Any:
     from somtorch.disparity.io import read_image
     from somtorch.disparity.scene import load_scene, scene_from_arrays
     from somtorch.disparity.stereo import SGBMParams, compute_disparity
 
-    path = Path(data_dir) / spec.folder
+    path = data_dir / spec.folder
     if not path.is_dir():
         raise FileNotFoundError(f"scene folder not found: {path} (set paths.data_dir)")
     if spec.disparity == "gt":
-        return load_scene(path)
+        scene = load_scene(path)
+        scene.name = spec.name
+        return scene
     if spec.disparity != "sgbm":
         scene = load_scene(path, disparity_file=spec.disparity)
         scene.name = spec.name
@@ -74,3 +87,45 @@ def load_dev_scene(spec: SceneSpec, data_dir: str | Path) -> Any:
     disp, valid = compute_disparity(images[0], images[1], SGBMParams(numDisparities=spec.ndisp))
     return scene_from_arrays(disp, valid, image=gt.image, objects=gt.objects, object_info=gt.object_info,
                              camera=gt.camera, name=spec.name)
+
+
+def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
+    """A copy of ``scene`` with a synthetic failure class added (see :class:`SceneSpec` ``junk``).
+
+    The junk sits at the main object's median disparity, so that disparity alone cannot tell it
+    from the object; the masks are unchanged (junk pixels are background).
+    """
+    import dataclasses
+
+    import torch
+
+    from somtorch.disparity.resize import resize_scene
+
+    if kind.startswith("resample:"):
+        f = float(kind.split(":", 1)[1])
+        out = resize_scene(scene, max(8, round(scene.width * f)), max(8, round(scene.height * f)))
+        return dataclasses.replace(out, name=f"{scene.name}+{kind}")
+    obj = scene.main_object_mask & scene.valid
+    d_obj = float(scene.disparity[obj].median())
+    h, w = scene.disparity.shape
+    g = torch.Generator().manual_seed(seed)
+    junk = torch.zeros(h, w, dtype=torch.bool)
+    if kind == "border":
+        band = max(2, round(0.03 * min(h, w)))
+        junk[:band] = torch.rand(band, w, generator=g) < 0.3
+        junk[:, :band] |= torch.rand(h, band, generator=g) < 0.3
+    elif kind == "specks":
+        ys, xs = obj.nonzero(as_tuple=True)
+        y0, y1, x0, x1 = int(ys.min()), int(ys.max()), int(xs.min()), int(xs.max())
+        my, mx = (y1 - y0) // 2 + 1, (x1 - x0) // 2 + 1  # a frame half the object's size around it
+        n = 40
+        yy = torch.randint(max(0, y0 - my), min(h - 2, y1 + my), (n,), generator=g)
+        xx = torch.randint(max(0, x0 - mx), min(w - 2, x1 + mx), (n,), generator=g)
+        for y, x in zip(yy.tolist(), xx.tolist()):
+            junk[y:y + 2, x:x + 2] = True
+    else:
+        raise ValueError(f"unknown junk kind {kind!r}: border, specks or resample:F")
+    junk &= ~obj
+    disparity = torch.where(junk, d_obj, scene.disparity)
+    return dataclasses.replace(scene, disparity=disparity, valid=scene.valid | junk,
+                               name=f"{scene.name}+{kind}")

@@ -17,121 +17,16 @@ The list of tuned constants of the object step, their values and how each was ch
 
 from __future__ import annotations
 
-import importlib
-import math
-import numbers
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
+
+from .constraints import (BOOL, FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Flag, Interval, OneOf,
+                          Validated)
 
 __all__ = [
     "AreaConfig", "BaselineConfig", "Choice", "FeatureConfig", "Flag", "GroundConfig", "Interval", "OneOf",
     "OutputConfig", "PipelineConfig", "ReductionConfig", "SOMConfig", "TrainConfig", "Validated", "with_overrides",
 ]
-
-
-# --------------------------------------------------------------------------------------------- rules
-@dataclass(frozen=True)
-class Interval:
-    """A number in ``[lo, hi]`` (``open_lo`` / ``open_hi`` exclude an end; None = unbounded).
-
-    ``integer``: an int (bools rejected); ``optional``: None allowed.
-    """
-
-    lo: float | None = None
-    hi: float | None = None
-    open_lo: bool = False
-    open_hi: bool = False
-    integer: bool = False
-    optional: bool = False
-
-    def describe(self) -> str:
-        lo = "-inf" if self.lo is None else f"{self.lo:g}"
-        hi = "inf" if self.hi is None else f"{self.hi:g}"
-        left = "(" if self.open_lo or self.lo is None else "["
-        right = ")" if self.open_hi or self.hi is None else "]"
-        kind = "an integer" if self.integer else "a number"
-        return f"{kind} in {left}{lo}, {hi}{right}"
-
-    def check(self, name: str, value: Any) -> None:
-        if value is None and self.optional:
-            return
-        if isinstance(value, bool) or not isinstance(value, numbers.Integral if self.integer else numbers.Real):
-            raise TypeError(f"{name} must be {self.describe()}; got {type(value).__name__} {value!r}")
-        v = float(value)
-        if not math.isfinite(v):
-            raise ValueError(f"{name} must be finite, {self.describe()}; got {value}")
-        if self.lo is not None and (v <= self.lo if self.open_lo else v < self.lo):
-            raise ValueError(f"{name} must be {self.describe()}; got {value}")
-        if self.hi is not None and (v >= self.hi if self.open_hi else v > self.hi):
-            raise ValueError(f"{name} must be {self.describe()}; got {value}")
-
-
-@dataclass(frozen=True)
-class Choice:
-    """An option name registered in ``registry`` (``"module:NAME"``, resolved when checked)."""
-
-    registry: str
-
-    def names(self) -> Any:
-        module, _, attr = self.registry.partition(":")
-        return getattr(importlib.import_module(module), attr)
-
-    def check(self, name: str, value: Any) -> None:
-        choices = self.names()
-        if not isinstance(value, str):
-            raise TypeError(f"{name} must be a string, one of {sorted(choices)}; got {type(value).__name__}")
-        if value not in choices:
-            raise ValueError(f"{name}={value!r} is not known; valid names: {', '.join(sorted(choices))}")
-
-
-@dataclass(frozen=True)
-class OneOf:
-    """One of a few literal values (e.g. a connectivity of 4 or 8)."""
-
-    values: tuple
-
-    def check(self, name: str, value: Any) -> None:
-        if isinstance(value, bool) or value not in self.values:
-            raise ValueError(f"{name} must be one of {list(self.values)}; got {value!r}")
-
-
-@dataclass(frozen=True)
-class Flag:
-    """A bool (``1`` / ``"yes"`` are not)."""
-
-    def check(self, name: str, value: Any) -> None:
-        if not isinstance(value, bool):
-            raise TypeError(f"{name} must be true or false; got {type(value).__name__} {value!r}")
-
-
-POSITIVE = Interval(0, None, open_lo=True)
-NON_NEGATIVE = Interval(0, None)
-POSITIVE_INT = Interval(1, None, integer=True)
-FRACTION = Interval(0, 1)
-BOOL = Flag()
-
-
-class Validated:
-    """Base of the config dataclasses: checks ``_constraints`` and ``_relations`` after ``__init__``.
-
-    ``_group`` prefixes the field names in messages (``objects.merge``); ``_relations`` is a list of
-    ``(predicate(cfg) -> bool, message)`` for rules that tie fields together.
-    """
-
-    _group: ClassVar[str] = ""
-    _constraints: ClassVar[dict[str, Any]] = {}
-    _relations: ClassVar[list[tuple[Any, str]]] = []
-
-    def __post_init__(self) -> None:
-        prefix = f"{self._group}." if self._group else ""
-        for name, rule in self._constraints.items():
-            rule.check(prefix + name, getattr(self, name))
-        for ok, message in self._relations:
-            if not ok(self):
-                raise ValueError(f"{self._group or type(self).__name__}: {message.format(c=self)}")
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)  # type: ignore[call-overload]
 
 
 _SOM = "somtorch.core.som"
@@ -349,6 +244,9 @@ class AreaConfig(Validated):
         box_quantile: the box spans the ``q … 1 − q`` quantiles of the kept pixels' coordinates.
         ground_clutter: pieces lying within ``ground_clutter ×`` the ground plane's inlier band
             are left out of the box (0 = off).
+        drop_specks: image-connected pieces of the area without a solid 3 × 3 block (on the
+            refinement grid) are left out of its box: specks and sparse speckle bands at the
+            object's disparity stop stretching it.
     """
 
     _group: ClassVar[str] = "objects"
@@ -357,7 +255,7 @@ class AreaConfig(Validated):
         "spread": Choice("somtorch.tasks.objects:SPREADS"), "min_boundary": NON_NEGATIVE,
         "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "grow": BOOL, "grow_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
-        "ground_clutter": NON_NEGATIVE, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
+        "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
         "select": Choice("somtorch.tasks.objects:SELECTIONS"), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
         "fail_safe": BOOL, "min_contrast": NON_NEGATIVE, "max_area_frac": Interval(0, 1, open_lo=True),
@@ -380,6 +278,7 @@ class AreaConfig(Validated):
     box_coverage: float = 0.99
     box_quantile: float = 0.001
     ground_clutter: float = 3.0
+    drop_specks: bool = True
     merge: float = 0.75
     min_purity: float = 0.25
     min_solidity: float = 0.25

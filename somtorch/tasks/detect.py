@@ -146,7 +146,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         else:
             done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                               stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
-                              clutter_band=ctx.clutter_band)
+                              clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)
         own = torch.isin(lab_s, torch.tensor(done.neurons, dtype=labels.dtype))
         done = replace(done, purity=box_purity(done, labels, ctx.integral),
                        solidity=_opened_share(own, square) / ctx.solidity, confidence=confidence)

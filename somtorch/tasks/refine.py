@@ -118,12 +118,16 @@ def grow_area(area: ObjectArea, labels: torch.Tensor, disparity: torch.Tensor, u
 
 def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.box_coverage,
                quantile: float = _D.box_quantile, stride: int = _D.grow_stride, ground_residual: torch.Tensor | None = None,
-               clutter_band: float = 0.0) -> ObjectArea:
+               clutter_band: float = 0.0, drop_specks: bool = _D.drop_specks) -> ObjectArea:
     """The box of the object inside a kept area, without the parts of its segments that are not it.
 
     The area's pixels are split into image-connected pieces (8-connectivity, on every ``stride``-th
     pixel), then
 
+    0. with ``drop_specks``, pieces without a solid 3 × 3 block of samples are dropped: specks and
+       sparse bands of speckles at the object's disparity (SGBM leaves them along the image border)
+       no longer stretch the box, whatever their share of the area's pixels, while a thin part
+       attached to a solid one (a chair's slats, a wheel's spokes) stays with its piece;
     1. pieces lying on the ground plane are dropped: more than half of their pixels within
        ``clutter_band`` px of the plane (``ground_residual`` = |disparity − plane disparity|). A computed
        (SGBM) floor has streaks off the RANSAC inlier band that share the object's disparity; they
@@ -142,7 +146,7 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
     import cv2
     import numpy as np
 
-    if coverage >= 1.0 and quantile <= 0.0 and (ground_residual is None or clutter_band <= 0):
+    if coverage >= 1.0 and quantile <= 0.0 and not drop_specks and (ground_residual is None or clutter_band <= 0):
         return area
     s = max(1, int(stride))
     mask = np.isin(labels[::s, ::s].cpu().numpy(), np.asarray(area.neurons))
@@ -159,6 +163,12 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
         if not flat.all():
             dropped = int(flat.sum())
             pieces, sizes = pieces[~flat], sizes[~flat]
+    if drop_specks:  # pieces without a solid 3x3 block of samples are specks, unless nothing else is left
+        opened = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8),
+                                  borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)  # outside = empty
+        solid = np.bincount(comp[opened], minlength=n)[pieces] > 0
+        if solid.any():
+            pieces, sizes = pieces[solid], sizes[solid]
     order = np.argsort(-sizes, kind="stable")
     need = min(coverage, 1.0) * sizes.sum()
     pieces = pieces[order[: int(np.searchsorted(np.cumsum(sizes[order]), need - 1e-9)) + 1]]
