@@ -1,127 +1,177 @@
-"""``python -m experiments.real_scenes``: the pipeline on every shared scene with an object mask.
+"""``python -m experiments.real_scenes``: the pipeline on a list of named scenes, scored.
 
-Each scene is run with ``ensemble`` seeds trained at once and scored against its hand-labelled
-mask (main object, and every object id separately). Writes ``results.json`` and ``results.md``
-(the README table) into the Hydra run directory. Presets: ``+preset=paper`` / ``+preset=robust``.
+The scenes come from ``conf/scene_lists/<scene_list>.yaml`` (``dev``: the masked development
+scenes, as given, with computed disparity and the synthetic failure classes; ``unlabelled``: the
+OAK-D scenes without a mask). Each scene is run with ``ensemble`` seeds trained at once.
 
-    python -m experiments.real_scenes ensemble=20
-    python -m experiments.real_scenes ensemble=20 +preset=paper
-    python -m experiments.real_scenes ensemble=20 features=nor
+* A scene with a mask is scored: Table 1 counts, useful and all-objects hits, fail-safe runs,
+  every labelled object separately.
+* A scene without a mask cannot be scored; what is counted is how often the kept area is junk the
+  checks are meant to reject — box purity or relative solidity below ``junk_bound``.
+
+Writes ``metrics.json`` (schema ``somtorch.scenes/1``: one row per scene, the resolved config)
+and ``results.md`` into the Hydra run folder, both staged and moved in only when every scene ran.
+
+    python -m experiments.real_scenes                                  # the real dev scenes, 20 runs
+    python -m experiments.real_scenes 'scenes=[kitti_est,motorcycle_q_sgbm,eth3d_terrace_sgbm,flyingthings3d_sgbm]'
+    python -m experiments.real_scenes scene_list=unlabelled objects.min_solidity=0
+    python -m experiments.real_scenes +preset=paper
 """
 
 from __future__ import annotations
 
 import logging
+import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Optional
 
 import hydra
-import numpy as np
 from hydra.core.config_store import ConfigStore
 from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.scenes import dev_scenes
+from experiments.scenes import dev_scenes, load_dev_scene
 from experiments.schema import RunConfig
 
 # absolute, so that the console script and python -m find the same configs from any directory
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+SCHEMA = "somtorch.scenes/1"
 log = logging.getLogger("somtorch.real_scenes")
-
-# the development scenes given as ground truth (or as shipped), declared in conf/scene_lists/dev.yaml
-DEFAULT_SCENES = [s.folder for s in dev_scenes() if not s.computed]
 
 
 @dataclass
 class ScenesConfig(RunConfig):
-    scenes: list[str] = field(default_factory=lambda: list(DEFAULT_SCENES))
+    """The pipeline config plus which scenes: ``scene_list`` (a file of ``conf/scene_lists``) and
+    ``scenes`` (names in it; None = its real scenes, without the synthetic failure classes)."""
+
+    scene_list: str = "dev"
+    scenes: Optional[list[str]] = None
+    junk_bound: float = 0.25
 
 
 ConfigStore.instance().store(name="real_scenes_schema", node=ScenesConfig)
 
 
-def evaluate(cfg: ScenesConfig) -> dict:
-    """Run and score every scene; returns the JSON-ready results."""
-    from somtorch.disparity.scene import load_scene
-    from somtorch.pipeline import run_pipeline
+def _median(values: list[float]) -> float | None:
+    import numpy as np
+
+    return float(np.median(values)) if values else None
+
+
+def score_scene(scene: Any, members: list, cfg: ScenesConfig) -> dict[str, Any]:
+    """One row: scores for a masked scene, junk counts for an unlabelled one."""
+    from somtorch.evaluation import all_objects, summary_stats
     from somtorch.tasks.scoring import score_reduction
 
+    found = [m for m in members if not m.no_object]
+    row: dict[str, Any] = {"runs": len(members), "no_object": len(members) - len(found),
+                           "kept_areas_mean": sum(len(m.kept) for m in members) / len(members)}
+    purity = [m.kept[0].purity for m in found]
+    solid = [m.kept[0].solidity for m in found]
+    row.update({"low_purity": sum(p < cfg.junk_bound for p in purity),
+                "low_solidity": sum(s < cfg.junk_bound for s in solid),
+                "median_purity": _median(purity), "median_solidity": _median(solid)})
+    if scene.objects is None:
+        return row
+    scores = [m.score for m in members]
+    target = all_objects(scene)
+    row.update({
+        "identified_100": sum(s.identified_100 for s in scores), "identified_95": sum(s.identified_95 for s in scores),
+        "useful_hits": sum(s.useful_hit for s in scores),
+        "all_objects_hits": sum(target.hit(m.reduction) for m in members),
+        "mean_identified_fraction": sum(s.identified_fraction for s in scores) / len(scores),
+        "reduction_95": summary_stats([s.reduction_union for s in scores if s.identified_95]),
+        "x_opt": scores[0].x_opt, "per_object": {},
+    })
+    for info in scene.object_info:
+        mask = scene.object_mask(info.id)
+        if not bool((mask & scene.valid).any()):
+            continue
+        s_obj = [score_reduction(m.reduction, mask, scene.valid) for m in members]
+        row["per_object"][str(info.id)] = {"name": info.name, "identified_95": sum(s.identified_95 for s in s_obj),
+                                           "mean_identified_fraction": sum(s.identified_fraction for s in s_obj)
+                                           / len(s_obj)}
+    return row
+
+
+def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
+    """Run every scene (all files read first); returns the content of ``metrics.json``."""
+    from somtorch.config import PipelineConfig
+    from dataclasses import fields
+
+    from somtorch.pipeline import run_pipeline
+
+    specs = dev_scenes(cfg.scenes, cfg.scene_list)
+    if cfg.scenes is None:
+        specs = [s for s in specs if s.junk is None]
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
-    missing = [s for s in cfg.scenes if not (data_dir / s).is_dir()]
-    if missing:
-        raise FileNotFoundError(f"scene folders not found under {data_dir}: {missing} (set paths.data_dir)")
-    scenes = [load_scene(data_dir / s) for s in cfg.scenes]  # every file checked before any training
-    for s, spec in zip(scenes, cfg.scenes):
-        if s.objects is None:
-            raise ValueError(f"{data_dir / spec} has no objects.png: it cannot be scored")
+    scenes = [load_dev_scene(s, data_dir) for s in specs]  # every file checked before any training
+    pcfg = PipelineConfig(**{f.name: getattr(cfg, f.name) for f in fields(PipelineConfig)})
     rows = []
-    for spec, scene in zip(cfg.scenes, scenes):
+    for spec, scene in zip(specs, scenes):
         t0 = time.perf_counter()
-        res = run_pipeline(scene, cfg, metrics=False)
-        wall = time.perf_counter() - t0
-        scores = [m.score for m in res.members]
-        per_object = {}
-        for info in scene.object_info:
-            mask = scene.object_mask(info.id)
-            if not bool((mask & scene.valid).any()):
-                continue
-            s_obj = [score_reduction(m.reduction, mask, scene.valid) for m in res.members]
-            per_object[info.name] = {"id": info.id, "identified_95": sum(s.identified_95 for s in s_obj),
-                                     "mean_identified_fraction": float(np.mean([s.identified_fraction for s in s_obj]))}
-        hits = [s.reduction_union for s in scores if s.identified_95]
-        row = {
-            "scene": spec, "runs": len(scores), "grid": f"{cfg.som.rows}x{cfg.som.cols}",
-            "mode": "OR" if cfg.features.train_stride > 1 else "NOR", "train_px": len(res.train_features),
-            "identified_100": sum(s.identified_100 for s in scores),
-            "identified_95": sum(s.identified_95 for s in scores),
-            "useful_hits": sum(s.useful_hit for s in scores),
-            "mean_identified_fraction": float(np.mean([s.identified_fraction for s in scores])),
-            "reduction_95_mean": float(np.mean(hits)) if hits else None,
-            "reduction_95_min": float(np.min(hits)) if hits else None,
-            "reduction_95_max": float(np.max(hits)) if hits else None,
-            "x_opt": scores[0].x_opt,
-            "ground_found": res.ground is not None,
-            "timings_ms_per_run": {k: 1e3 * v / len(scores) if k in ("objects", "reduction") else 1e3 * v
-                                   for k, v in res.timings.items()},
-            "wall_s": wall, "per_object": per_object,
-        }
+        res = run_pipeline(scene, pcfg, metrics=False)
+        row = {"scene": spec.name, "folder": spec.folder, "disparity": spec.disparity, "junk": spec.junk,
+               "grid": f"{cfg.som.rows}x{cfg.som.cols}", "mode": "OR" if cfg.features.train_stride > 1 else "NOR",
+               "train_px": len(res.train_features), "ground_found": res.ground is not None,
+               **score_scene(scene, res.members, cfg),
+               "timings_ms": {k: 1e3 * v for k, v in res.timings.items()}, "wall_s": time.perf_counter() - t0}
         rows.append(row)
-        log.info("%s: identified>=95 %d/%d, useful %d, mean reduction %s, x_opt %.1f", spec, row["identified_95"],
-                 row["runs"], row["useful_hits"], row["reduction_95_mean"], row["x_opt"])
-    return {"label": cfg.label, "config": OmegaConf.to_container(OmegaConf.structured(cfg)), "rows": rows}
+        log.info("%s: %s", spec.name, ", ".join(f"{k} {row[k]}" for k in ("useful_hits", "all_objects_hits",
+                                                                            "low_solidity", "no_object") if k in row))
+    return {"schema": SCHEMA, "label": cfg.label, "scene_list": cfg.scene_list, "rows": rows,
+            "config": OmegaConf.to_container(OmegaConf.structured(cfg))}
 
 
-def to_markdown(results: dict) -> str:
-    """The README table: one row per scene."""
-    head = ("| scene | preset | grid | mode | runs | ≥95 % identified | 100 % | useful hits | mean reduction (≥95 % runs) "
-            "| x_opt | ms: train / segment (whole ensemble) / objects (per run) |\n|---|---|---|---|---|---|---|---|---|---|---|")
-    lines = [head]
-    for r in results["rows"]:
-        t = r["timings_ms_per_run"]
-        red = "–" if r["reduction_95_mean"] is None else f"{r['reduction_95_mean']:.1f} %"
-        lines.append(f"| {r['scene']} | {results['label']} | {r['grid']} | {r['mode']} | {r['runs']} | "
-                     f"{r['identified_95']} | {r['identified_100']} | {r['useful_hits']} | {red} | {r['x_opt']:.1f} % | "
-                     f"{t.get('train', 0):.0f} / {t.get('segment', 0):.0f} / {t.get('objects', 0):.1f} |")
-    lines.append("")
-    lines.append("| scene | object | runs with ≥95 % identified | mean identified fraction |\n|---|---|---|---|")
-    for r in results["rows"]:
-        for name, o in r["per_object"].items():
-            lines.append(f"| {r['scene']} | {o['id']}: {name} | {o['identified_95']}/{r['runs']} | "
-                         f"{o['mean_identified_fraction']:.2f} |")
+def to_markdown(results: dict[str, Any]) -> str:
+    """The tables: masked scenes (scores, per object) and unlabelled ones (junk counts)."""
+    masked = [r for r in results["rows"] if "useful_hits" in r]
+    other = [r for r in results["rows"] if "useful_hits" not in r]
+    lines = []
+    if masked:
+        lines += ["| scene | preset | mode | runs | ≥95 % identified | 100 % | useful hits | all-objects hits | "
+                  "no object | mean reduction (≥95 % runs) | x_opt |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for r in masked:
+            red = r["reduction_95"]["mean"]
+            lines.append(f"| {r['scene']} | {results['label']} | {r['mode']} | {r['runs']} | {r['identified_95']} | "
+                         f"{r['identified_100']} | {r['useful_hits']} | {r['all_objects_hits']} | {r['no_object']} | "
+                         f"{'–' if red is None else f'{red:.1f} %'} | {r['x_opt']:.1f} % |")
+        lines += ["", "| scene | object | runs with ≥95 % identified | mean identified fraction |", "|---|---|---|---|"]
+        for r in masked:
+            for oid, o in r["per_object"].items():
+                lines.append(f"| {r['scene']} | {oid}: {o['name']} | {o['identified_95']}/{r['runs']} | "
+                             f"{o['mean_identified_fraction']:.2f} |")
+    if other:
+        b = results["config"]["junk_bound"]
+        lines += ["", f"| scene (no mask) | runs | purity < {b} | solidity < {b} | no object | median purity | "
+                      "median solidity |", "|---|---|---|---|---|---|---|"]
+        for r in other:
+            mp, ms = r["median_purity"], r["median_solidity"]
+            lines.append(f"| {r['scene']} | {r['runs']} | {r['low_purity']} | {r['low_solidity']} | {r['no_object']} | "
+                         f"{'–' if mp is None else f'{mp:.2f}'} | {'–' if ms is None else f'{ms:.2f}'} |")
     return "\n".join(lines) + "\n"
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="real_scenes")
 def main(dcfg: DictConfig) -> dict:
-    from somtorch.atomic import write_bytes, write_json
+    import shutil
+
+    from somtorch.atomic import commit_staged, write_bytes, write_json
 
     cfg: ScenesConfig = OmegaConf.to_object(dcfg)
     out = Path(HydraConfig.get().runtime.output_dir)
     results = evaluate(cfg)
-    write_bytes(out / "results.md", to_markdown(results).encode())
-    write_json(out / "results.json", results)
+    out.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out))
+    try:
+        write_bytes(stage / "results.md", to_markdown(results).encode())
+        write_json(stage / "metrics.json", results)
+        commit_staged(stage, out)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
     log.info("tables in %s", out / "results.md")
     return results
 

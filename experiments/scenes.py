@@ -10,7 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
 
-SCENES_FILE = Path(__file__).resolve().parents[1] / "conf" / "scene_lists" / "dev.yaml"
+SCENE_LISTS = Path(__file__).resolve().parents[1] / "conf" / "scene_lists"
+SCENES_FILE = SCENE_LISTS / "dev.yaml"
 
 
 @dataclass
@@ -40,17 +41,22 @@ class SceneSpec:
         return self.disparity != "gt" or self.junk is not None
 
 
-def dev_scenes(names: list[str] | None = None) -> list[SceneSpec]:
-    """The specs of ``conf/scene_lists/dev.yaml``: all in the file's order, or those named in the given order."""
+def dev_scenes(names: list[str] | None = None, scene_list: str = "dev") -> list[SceneSpec]:
+    """The specs of ``conf/scene_lists/<scene_list>.yaml``: all in the file's order, or those named
+    in the given order."""
     import yaml
 
-    specs = [SceneSpec(**d) for d in yaml.safe_load(SCENES_FILE.read_text())]
+    path = SCENE_LISTS / f"{scene_list}.yaml"
+    if not path.is_file():
+        known = sorted(p.stem for p in SCENE_LISTS.glob("*.yaml"))
+        raise ValueError(f"scene_list={scene_list!r}: no {path}; known lists: {known}")
+    specs = [SceneSpec(**d) for d in yaml.safe_load(path.read_text())]
     if names is None:
         return specs
     known = {s.name for s in specs}
     unknown = [n for n in names if n not in known]
     if unknown:
-        raise ValueError(f"unknown development scene(s) {unknown}; {SCENES_FILE} lists {sorted(known)}")
+        raise ValueError(f"unknown scene(s) {unknown}; {path} lists {sorted(known)}")
     by_name = {s.name: s for s in specs}
     return [by_name[n] for n in names]
 

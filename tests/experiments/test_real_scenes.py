@@ -11,7 +11,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from experiments.real_scenes import DEFAULT_SCENES, ScenesConfig
+from experiments.real_scenes import ScenesConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -22,37 +22,50 @@ def test_config_composes_with_each_preset(preset):
         cfg = compose("real_scenes", overrides=[f"+preset={preset}"] if preset else [])
     obj = OmegaConf.to_object(cfg)
     assert isinstance(obj, ScenesConfig)
-    assert obj.scenes == DEFAULT_SCENES
+    assert obj.scenes is None and obj.scene_list == "dev"
     if preset == "paper":
         assert (obj.som.rows, obj.som.cols, obj.objects.select, obj.ground.enabled) == (4, 7, "nearest", False)
         assert obj.label == "paper"
 
 
-def test_two_scenes_run_and_tables_agree(shared_data, tmp_path):
-    scenes = "[eth3d/terrace,kitti2015/devkit_demo]"
-    proc = subprocess.run(
-        [sys.executable, "-m", "experiments.real_scenes", f"hydra.run.dir={tmp_path}", "ensemble=2",
-         "train.epochs=3", f"scenes={scenes}", f"paths.data_dir={shared_data}"],
-        cwd=ROOT, capture_output=True, text=True, timeout=300)
+def _run(tmp_path, *overrides, timeout=300):
+    return subprocess.run([sys.executable, "-m", "experiments.real_scenes", f"hydra.run.dir={tmp_path}", *overrides],
+                          cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+
+
+def test_named_scenes_run_and_tables_agree(shared_data, tmp_path):
+    proc = _run(tmp_path, "ensemble=2", "train.epochs=3", "scenes=[eth3d_terrace,kitti,kitti_est]",
+                f"paths.data_dir={shared_data}")
     assert proc.returncode == 0, proc.stderr[-2000:]
-    res = json.loads((tmp_path / "results.json").read_text())
-    assert [r["scene"] for r in res["rows"]] == ["eth3d/terrace", "kitti2015/devkit_demo"]
+    res = json.loads((tmp_path / "metrics.json").read_text())
+    assert res["schema"] == "somtorch.scenes/1"
+    assert [r["scene"] for r in res["rows"]] == ["eth3d_terrace", "kitti", "kitti_est"]
     for r in res["rows"]:
-        assert r["runs"] == 2
+        assert r["runs"] == 2 and 0 <= r["no_object"] <= 2
         assert 0 <= r["useful_hits"] <= r["identified_95"] <= r["runs"]
-        assert r["identified_100"] <= r["identified_95"]
+        assert r["identified_100"] <= r["identified_95"] and 0 <= r["all_objects_hits"] <= r["runs"]
         assert set(r["per_object"]) and all(0 <= o["mean_identified_fraction"] <= 1 for o in r["per_object"].values())
     assert res["rows"][0]["x_opt"] == pytest.approx(94.3, abs=0.05)
+    assert res["rows"][2]["disparity"] == "disp_est.png" and sorted(res["rows"][2]["per_object"]) == ["1", "2", "3", "4"]
     md = (tmp_path / "results.md").read_text()
-    assert md.count("| eth3d/terrace |") == 1 + 3  # one scene row + three object rows
+    assert md.count("| eth3d_terrace |") == 1 + 3  # one scene row + three object rows
     assert "car_silver_opel_left" in md
+    assert not list(tmp_path.glob(".partial-*"))
 
 
-def test_missing_scene_folder_fails_before_work(tmp_path):
-    proc = subprocess.run(
-        [sys.executable, "-m", "experiments.real_scenes", f"hydra.run.dir={tmp_path}", "ensemble=1",
-         "scenes=[no/such_scene]", f"paths.data_dir={tmp_path}"],
-        cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert proc.returncode != 0
-    assert "no/such_scene" in proc.stderr
-    assert not (tmp_path / "results.json").exists() and not (tmp_path / "results.md").exists()
+def test_unlabelled_scenes_get_junk_counts(shared_data, tmp_path):
+    proc = _run(tmp_path, "ensemble=3", "scene_list=unlabelled", "scenes=[oakd_pov_controllers]",
+                "objects.min_solidity=0", f"paths.data_dir={shared_data}")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    r = json.loads((tmp_path / "metrics.json").read_text())["rows"][0]
+    assert r["scene"] == "oakd_pov_controllers" and r["runs"] == 3 and "useful_hits" not in r
+    assert 0 <= r["low_solidity"] <= 3 and 0 <= r["low_purity"] <= 3 and 0 < r["median_purity"] <= 1
+    assert "| oakd_pov_controllers | 3 |" in (tmp_path / "results.md").read_text()
+
+
+def test_unknown_scene_or_list_fails_before_work(tmp_path):
+    for bad in ("scenes=[no_such_scene]", "scene_list=nope"):
+        proc = _run(tmp_path, "ensemble=1", bad, f"paths.data_dir={tmp_path}", timeout=120)
+        assert proc.returncode != 0
+        assert ("no_such_scene" if "scenes" in bad else "nope") in proc.stderr
+        assert not (tmp_path / "metrics.json").exists() and not (tmp_path / "results.md").exists()

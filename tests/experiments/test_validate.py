@@ -42,7 +42,7 @@ def test_every_dev_scene_spec_is_unique_and_the_computed_ones_name_their_source(
     for s in specs:
         if s.disparity == "sgbm":
             assert s.left and s.right and s.ndisp % 16 == 0
-    with pytest.raises(ValueError, match="unknown development scene"):
+    with pytest.raises(ValueError, match="unknown scene"):
         dev_scenes(["nope"])
 
 

@@ -56,10 +56,9 @@ def test_purity_and_solidity_tests_reject_sgbm_junk_on_a_computed_disparity_map(
     contrasty area is junk at the left border (no match within the search range) and speckles, which
     the purity test skips, and the solidity test alone mostly too (20 seeds, measured 19 useful hits
     with both, 16 with the solidity test only, 3 with neither)."""
-    from experiments.computed_disparity import computed_scene
     from somtorch.tasks.objects import AreaConfig
 
-    scene = computed_scene("eth3d_terrace_sgbm", shared_data)
+    scene = load_dev_scene(dev_scenes(["eth3d_terrace_sgbm"])[0], shared_data)
     useful = {}
     for purity, solid in ((0.25, 0.25), (0.0, 0.25), (0.0, 0.0)):
         cfg = PipelineConfig(ensemble=20, objects=AreaConfig(min_purity=purity, min_solidity=solid))
@@ -67,21 +66,6 @@ def test_purity_and_solidity_tests_reject_sgbm_junk_on_a_computed_disparity_map(
     assert useful[0.25, 0.25] >= 15, useful
     assert useful[0.0, 0.25] >= 12, useful
     assert useful[0.0, 0.0] <= 8, useful
-
-
-def test_computed_disparity_script_prints_a_row_per_scene(shared_data, capsys):
-    from experiments.computed_disparity import main
-
-    rows = main(["--runs", "2", "--scenes", "kitti_est", "--data-dir", str(shared_data),
-                 "--set", "objects.min_purity=0", "--set", "som.rows=6"])
-    assert [r["scene"] for r in rows] == ["kitti_est"] and rows[0]["runs"] == 2
-    assert 0 <= rows[0]["useful_hits"] <= rows[0]["identified_95"] <= 2
-    per_object = rows[0]["per_object_identified_95"]
-    assert sorted(per_object) == [1, 2, 3, 4] and per_object[1] == rows[0]["identified_95"]
-    assert all(0 <= n <= 2 for n in per_object.values())
-    assert "| kitti_est | 2 |" in capsys.readouterr().out
-    with pytest.raises(ValueError, match="objects.bogus=1"):
-        main(["--runs", "1", "--scenes", "kitti_est", "--data-dir", str(shared_data), "--set", "objects.bogus=1"])
 
 
 def test_solidity_test_rejects_ceiling_streaks_on_an_unlabelled_sgbm_scene(shared_data):
@@ -99,16 +83,3 @@ def test_solidity_test_rejects_ceiling_streaks_on_an_unlabelled_sgbm_scene(share
         low[v] = sum(not m.no_object and m.kept[0].solidity < 0.25 for m in members)
     assert low[0.25] <= 2, low
     assert low[0.0] >= 6, low
-
-
-def test_unlabelled_script_counts_junk_picks(shared_data, capsys):
-    from experiments.unlabelled import main
-
-    rows = main(["--runs", "3", "--scenes", "oakd_stereodemo/pov_controllers", "--data-dir", str(shared_data),
-                 "--set", "objects.min_solidity=0"])
-    assert [r["scene"] for r in rows] == ["oakd_stereodemo/pov_controllers"] and rows[0]["runs"] == 3
-    assert 0 <= rows[0]["low_solidity"] <= 3 and 0 <= rows[0]["low_purity"] <= 3
-    assert 0 < rows[0]["median_solidity"] and 0 < rows[0]["median_purity"] <= 1
-    assert "| oakd_stereodemo/pov_controllers | 3 |" in capsys.readouterr().out
-    with pytest.raises(SystemExit, match="not found"):
-        main(["--runs", "1", "--scenes", "oakd_stereodemo/nope", "--data-dir", str(shared_data)])
