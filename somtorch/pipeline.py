@@ -11,6 +11,7 @@ free of I/O.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -35,6 +36,7 @@ from .tasks.scoring import Score, optimal_reduction, score_reduction
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
            "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig", "run_pipeline"]
 DETERMINISTIC_METHODS = tuple(n for n, s in SEGMENTERS.items() if s.deterministic)
+log = logging.getLogger("somtorch.pipeline")
 
 
 @dataclass
@@ -130,6 +132,10 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
         score = score_reduction(red, obj_mask, scene.valid, x_opt=x_opt) if obj_mask is not None else None
         members.append(MemberResult(seg.seeds[e], found.areas, found.kept, red, score, found.stats,
                                     found.no_object))
+    fallback = sum(m.no_object for m in members)
+    if fallback:
+        log.warning("scene %s: %d of %d member(s) found no convincing object area; the whole map is kept "
+                    "(flagged no_object)", scene.name, fallback, len(members))
     return members
 
 

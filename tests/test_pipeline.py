@@ -186,3 +186,21 @@ def test_minisom_method_needs_the_online_rule(motorcycle):
 def test_unknown_method_is_rejected():
     with pytest.raises(ValueError, match="method"):
         PipelineConfig(method="dbscan")
+
+
+def test_a_map_without_a_convincing_object_keeps_everything_flags_it_and_warns(caplog):
+    import logging
+
+    from somtorch.disparity.scene import scene_from_arrays
+
+    # a smooth slanted plane with no object: every candidate fails or nothing stands out
+    ys, xs = torch.meshgrid(torch.arange(60.0), torch.arange(80.0), indexing="ij")
+    d = 10.0 + 0.05 * xs + 0.02 * ys + 0.01 * torch.sin(xs)
+    scene = scene_from_arrays(d, torch.ones(60, 80, dtype=torch.bool), name="plane")
+    cfg = PipelineConfig(ensemble=3)
+    cfg.objects.min_purity, cfg.objects.purity_candidates = 1.0, 1  # nothing can pass
+    with caplog.at_level(logging.WARNING, logger="somtorch.pipeline"):
+        res = run_pipeline(scene, cfg, metrics=False)
+    assert all(m.no_object for m in res.members)
+    assert all(m.reduction.reduction_union == 0.0 for m in res.members)  # the whole map is kept
+    assert "no convincing object area" in caplog.text and "3 of 3" in caplog.text
