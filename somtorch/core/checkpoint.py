@@ -36,9 +36,9 @@ def save(som: SOM, path: str | os.PathLike) -> Path:
 
     wpath, jpath = _paths(path)
     meta = {"format": FORMAT, **som.config(), "initialized": som.initialized}
-    with atomic_path(wpath) as tmp:
+    with atomic_path(wpath) as tmp:  # one metadata key, sorted JSON: identical maps give identical bytes
         save_file({"weight": som.weight.detach().contiguous().cpu()}, str(tmp),
-                  metadata={"format": FORMAT, "config": json.dumps(meta)})
+                  metadata={"config": json.dumps(meta, sort_keys=True)})
     write_json(jpath, meta)
     return wpath
 
@@ -59,13 +59,17 @@ def load(cls: type[SOM], path: str | os.PathLike, *, device=None) -> SOM:
             weight = f.get_tensor("weight") if "weight" in f.keys() else None
     except (SafetensorError, OSError, ValueError) as err:
         raise DataFileError(wpath, f"not a readable safetensors file ({err})") from err
-    if meta.get("format") != FORMAT or "config" not in meta:
-        raise DataFileError(wpath, f"not a somtorch SOM checkpoint (metadata format={meta.get('format')!r}, "
-                                   f"expected {FORMAT!r})")
+    try:
+        cfg = json.loads(meta["config"]) if "config" in meta else {}
+    except (ValueError, RecursionError) as err:
+        raise DataFileError(wpath, f"broken hyper-parameters in the metadata ({type(err).__name__})") from None
+    fmt = meta.get("format", cfg.get("format") if isinstance(cfg, dict) else None)
+    if fmt != FORMAT or not isinstance(cfg, dict):
+        raise DataFileError(wpath, f"not a somtorch SOM checkpoint (metadata format={fmt!r}, expected {FORMAT!r})")
     if weight is None:
         raise DataFileError(wpath, "has no tensor named 'weight'")
+    _check_against_weight(wpath, cfg, weight)
     try:
-        cfg = json.loads(meta["config"])
         som = cls(cfg["rows"], cfg["cols"], cfg["dim"], ensemble=cfg["ensemble"], topology=cfg["topology"],
                   toroidal=cfg["toroidal"], seeds=cfg["seeds"], dtype=getattr(torch, cfg["dtype"]),
                   device=device)
@@ -74,3 +78,23 @@ def load(cls: type[SOM], path: str | os.PathLike, *, device=None) -> SOM:
     som.set_weight(weight)
     som.initialized = bool(cfg.get("initialized", True))
     return som
+
+
+def _check_against_weight(path: Path, cfg: dict, weight: torch.Tensor) -> None:
+    """The metadata must describe the stored tensor before anything is built from it (a 1 kB file
+    claiming ``rows=2000`` would otherwise allocate gigabytes of grid distances)."""
+    for key in ("rows", "cols", "dim", "ensemble"):
+        v = cfg.get(key)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise DataFileError(path, f"metadata field {key!r} must be a positive integer; got {v!r}")
+    expected = (cfg["ensemble"], cfg["rows"] * cfg["cols"], cfg["dim"])
+    if tuple(weight.shape) != expected:
+        raise DataFileError(path, f"metadata (ensemble={cfg['ensemble']}, rows={cfg['rows']}, cols={cfg['cols']}, "
+                                  f"dim={cfg['dim']}) describes weights {expected} but the file stores "
+                                  f"{tuple(weight.shape)}")
+    seeds = cfg.get("seeds")
+    if not isinstance(seeds, list) or len(seeds) != cfg["ensemble"] or \
+            not all(isinstance(x, int) and not isinstance(x, bool) for x in seeds):
+        raise DataFileError(path, f"metadata field 'seeds' must list {cfg['ensemble']} integers")
+    if cfg.get("dtype") not in ("float32", "float64", "float16", "bfloat16"):
+        raise DataFileError(path, f"metadata field 'dtype' must be a floating dtype name; got {cfg.get('dtype')!r}")

@@ -18,6 +18,9 @@ from __future__ import annotations
 
 import json
 import logging
+import tokenize
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -101,7 +104,8 @@ def read_disparity(
         raw = _load_npz(path)
     raw = _as_2d_numeric(path, raw)
     values = raw.astype(np.float64) * (1.0 if scale is None else scale)  # (H, W)
-    valid = np.isfinite(values) & (values >= 0)
+    with np.errstate(over="ignore"):  # values beyond float32 become inf there: invalid, not a huge disparity
+        valid = np.isfinite(values.astype(np.float32)) & (values >= 0)
     if zero_is_invalid:
         valid &= raw != 0
     if invalid_value is not None:
@@ -128,18 +132,26 @@ def _read_png_disparity(path: Path, scale: float | None) -> np.ndarray:
     return img
 
 
+# what numpy and zipfile raise on corrupt, truncated, encrypted or mis-named .npy / .npz files
+_NUMPY_READ_ERRORS = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+                      RuntimeError, tokenize.TokenError, SyntaxError, AttributeError, KeyError, MemoryError)
+
+
 def _load_npy(path: Path) -> np.ndarray:
     try:
-        return np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as e:
-        raise DataFileError(path, f"cannot read .npy: {e}") from None
+        a = np.load(path, allow_pickle=False)
+    except _NUMPY_READ_ERRORS as e:
+        raise DataFileError(path, f"cannot read .npy: {type(e).__name__}: {e}") from None
+    if not isinstance(a, np.ndarray):  # an .npz archive under a .npy name
+        raise DataFileError(path, "is a zip archive (.npz), not a .npy array; rename it to .npz")
+    return a
 
 
 def _load_npz(path: Path) -> np.ndarray:
     try:
         data = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as e:
-        raise DataFileError(path, f"cannot read .npz: {e}") from None
+    except _NUMPY_READ_ERRORS as e:
+        raise DataFileError(path, f"cannot read .npz: {type(e).__name__}: {e}") from None
     if isinstance(data, np.ndarray):  # a plain .npy under a .npz name
         return data
     with data:
@@ -152,9 +164,12 @@ def _load_npz(path: Path) -> np.ndarray:
             raise DataFileError(path, f"cannot tell which array is the disparity: keys {keys}; "
                                       f"name it {' or '.join(_NPZ_KEYS)}, or store a single array")
         try:
-            return data[key]
-        except (ValueError, OSError, EOFError) as e:
-            raise DataFileError(path, f"cannot read array {key!r} from the .npz: {e}") from None
+            arr = data[key]
+        except _NUMPY_READ_ERRORS as e:
+            raise DataFileError(path, f"cannot read array {key!r} from the .npz: {type(e).__name__}: {e}") from None
+        if not isinstance(arr, np.ndarray):
+            raise DataFileError(path, f"member {key!r} of the .npz is not an array")
+        return arr
 
 
 def _as_2d_numeric(path: Path, a: np.ndarray) -> np.ndarray:
@@ -258,6 +273,10 @@ def read_json(path: str | Path) -> dict[str, Any]:
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DataFileError(path, f"invalid JSON: {e}") from None
+    except RecursionError:
+        raise DataFileError(path, "invalid JSON: nested too deeply") from None
+    except ValueError as e:  # e.g. integers of more than 4300 digits
         raise DataFileError(path, f"invalid JSON: {e}") from None
     if not isinstance(doc, dict):
         raise DataFileError(path, f"expected a JSON object at the top level; got {type(doc).__name__}")
