@@ -146,9 +146,14 @@ def _log_hparams(writer, cfg: RunConfig, metrics: dict) -> None:
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="run")
 def main(dcfg: DictConfig) -> dict:
     """Hydra entry point."""
+    from somtorch.atomic import exclusive_folder, exit_cleanly_on_sigterm
+
     cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
+    exit_cleanly_on_sigterm()  # a killed run removes its staging folder
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with exclusive_folder(out_dir):  # two runs never write into one folder
+        return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
 
 
 if __name__ == "__main__":

@@ -42,6 +42,7 @@ from omegaconf import DictConfig, OmegaConf
 from experiments.run import CONF_DIR, load_input
 from experiments.schema import RunConfig, register
 from experiments.metrics_schema import SCHEMA, config_hash
+from somtorch.atomic import exit_cleanly_on_sigterm
 from somtorch.evaluation import merge_runs, per_object_scores, run_records, summarize_runs
 
 log = logging.getLogger("somtorch.study")
@@ -233,23 +234,12 @@ def _write_tensorboard(writer, cfg: StudyConfig, metrics: dict[str, Any]) -> Non
     writer.add_hparams(hp, res, run_name=".")
 
 
-def _exit_cleanly_on_sigterm() -> None:
-    """SIGTERM (``kill``, SLURM pre-emption) raises SystemExit, so the staging folder is removed;
-    only possible in the main thread (launchers may run jobs elsewhere)."""
-    import signal
-    import sys
-    import threading
-
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
-
-
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="study")
 def main(dcfg: DictConfig) -> float:
     """Hydra entry point; returns the job's objective (``summary.tradeoff``; 0 without an object mask)."""
     cfg: StudyConfig = OmegaConf.to_object(dcfg)
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    _exit_cleanly_on_sigterm()
+    exit_cleanly_on_sigterm()
     metrics = execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
     return float(metrics["summary"].get("tradeoff", 0.0))
 

@@ -61,3 +61,32 @@ def commit_staged(stage: str | os.PathLike, out_dir: str | os.PathLike, last: st
         if target.is_dir():
             shutil.rmtree(target)
         os.replace(entry, target)
+
+
+def exit_cleanly_on_sigterm() -> None:
+    """Make SIGTERM (``kill``, SLURM pre-emption) raise ``SystemExit``, so ``finally`` blocks run and
+    staging folders are removed. Only possible in the main thread (launchers may run jobs elsewhere)."""
+    import signal
+    import sys
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
+
+
+@contextlib.contextmanager
+def exclusive_folder(folder: str | os.PathLike, name: str = ".lock") -> Iterator[Path]:
+    """Hold ``folder/name`` (created exclusively) while the block runs: a second writer of the same
+    folder fails at once with a clear error instead of overwriting the first one's results."""
+    path = Path(folder) / name
+    try:
+        fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+    except FileExistsError:
+        raise RuntimeError(f"{folder} is being written by another run (lock file {path}); give this run its "
+                           "own folder (hydra.run.dir=...) or remove the lock if no run is alive") from None
+    try:
+        os.write(fd, str(os.getpid()).encode())
+        os.close(fd)
+        yield path
+    finally:
+        path.unlink(missing_ok=True)

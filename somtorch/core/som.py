@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import os
+import weakref
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -97,9 +98,24 @@ class SOM(nn.Module):
         d2 = grid_sqdist(self.rows, self.cols, topology, toroidal, dtype=dtype, device=device)
         self.register_buffer("grid_d2", d2, persistent=False)
         self.register_buffer("adjacency", adjacency(d2, topology), persistent=False)
+        self._fresh = (weakref.ref(self.weight), self.weight._version)  # the untouched zero weights
         self.initialized = False
 
     # ------------------------------------------------------------------ basics
+    @property
+    def initialized(self) -> bool:
+        """Whether the weights hold values: set from data, assigned (``som.weight = w``,
+        ``som.weight.copy_(w)`` under ``no_grad``, ``load_state_dict``) or loaded. It follows the
+        weights themselves (any in-place change or a new tensor counts), not only the setters."""
+        ref, version = self._fresh
+        return self._initialized or ref() is not self.weight or self.weight._version != version
+
+    @initialized.setter
+    def initialized(self, value: bool) -> None:
+        self._initialized = bool(value)
+        if not value:  # from now on, only a change of the weights marks the map initialised
+            self._fresh = (weakref.ref(self.weight), self.weight._version)
+
     @property
     def num_neurons(self) -> int:
         """K = rows · cols."""

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import tokenize
 import zipfile
 import zlib
@@ -137,7 +138,30 @@ _NUMPY_READ_ERRORS = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.er
                       RuntimeError, tokenize.TokenError, SyntaxError, AttributeError, KeyError, MemoryError)
 
 
+MAX_PIXELS = int(os.environ.get("SOMTORCH_MAX_PIXELS", 200_000_000))
+"""Largest map (H·W, or array elements) a reader accepts; checked from the file's header before any
+pixel is read (``SOMTORCH_MAX_PIXELS`` overrides it)."""
+
+
+def _check_npy_header(path: Path, f: Any) -> None:
+    """Read the .npy header of the open file ``f`` and refuse shapes beyond :data:`MAX_PIXELS`."""
+    fmt = np.lib.format
+    try:
+        major, _ = fmt.read_magic(f)
+        shape, _, dtype = (fmt.read_array_header_1_0(f) if major == 1 else fmt.read_array_header_2_0(f))
+    except _NUMPY_READ_ERRORS as e:
+        raise DataFileError(path, f"bad .npy header: {type(e).__name__}: {e}") from None
+    n = int(np.prod(shape, dtype=np.float64)) if shape else 1
+    if n > MAX_PIXELS or n * max(dtype.itemsize, 1) > 8 * MAX_PIXELS:
+        raise DataFileError(path, f"the array header claims shape {shape} ({n:,} elements of {dtype}); the "
+                                  f"limit is {MAX_PIXELS:,} (SOMTORCH_MAX_PIXELS)")
+
+
 def _load_npy(path: Path) -> np.ndarray:
+    with open(path, "rb") as f:
+        if f.read(6) == b"\x93NUMPY":
+            f.seek(0)
+            _check_npy_header(path, f)
     try:
         a = np.load(path, allow_pickle=False)
     except _NUMPY_READ_ERRORS as e:
@@ -155,6 +179,13 @@ def _load_npz(path: Path) -> np.ndarray:
     if isinstance(data, np.ndarray):  # a plain .npy under a .npz name
         return data
     with data:
+        try:  # sizes from the zip directory and the member's header, before inflating anything
+            for info in data.zip.infolist():
+                if info.file_size > 8 * MAX_PIXELS + 4096:
+                    raise DataFileError(path, f"member {info.filename!r} inflates to {info.file_size:,} bytes; the "
+                                              f"limit is {8 * MAX_PIXELS + 4096:,} (SOMTORCH_MAX_PIXELS)")
+        except AttributeError:
+            pass
         keys = list(data.files)
         if not keys:
             raise DataFileError(path, "the .npz archive contains no arrays; expected one named "
@@ -163,6 +194,13 @@ def _load_npz(path: Path) -> np.ndarray:
         if key is None:
             raise DataFileError(path, f"cannot tell which array is the disparity: keys {keys}; "
                                       f"name it {' or '.join(_NPZ_KEYS)}, or store a single array")
+        try:
+            with data.zip.open(key + ".npy") as member:
+                _check_npy_header(path, member)
+        except KeyError:
+            pass
+        except _NUMPY_READ_ERRORS as e:
+            raise DataFileError(path, f"cannot read array {key!r} from the .npz: {type(e).__name__}: {e}") from None
         try:
             arr = data[key]
         except _NUMPY_READ_ERRORS as e:
@@ -187,8 +225,26 @@ def _as_2d_numeric(path: Path, a: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------------- images and masks
 
 
+def _check_png_header(path: Path) -> None:
+    """Refuse a PNG whose IHDR claims more than :data:`MAX_PIXELS` before OpenCV decodes it."""
+    with open(path, "rb") as f:
+        head = f.read(24)
+    if not head.startswith(b"\x89PNG\r\n\x1a\n"):
+        return  # not a PNG: OpenCV decides
+    if len(head) < 24 or head[12:16] != b"IHDR":
+        raise DataFileError(path, "truncated or corrupt PNG: no IHDR chunk")
+    w, h = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    if w == 0 or h == 0 or w * h > MAX_PIXELS:
+        raise DataFileError(path, f"the PNG header claims {w}x{h} px; the limit is {MAX_PIXELS:,} px "
+                                  "(SOMTORCH_MAX_PIXELS)")
+
+
 def _imread(path: Path) -> np.ndarray:
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    _check_png_header(path)
+    try:
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    except cv2.error as e:
+        raise DataFileError(path, f"OpenCV cannot decode this image: {str(e).strip().splitlines()[-1]}") from None
     if img is None:
         raise DataFileError(path, "OpenCV cannot decode this file as an image (corrupt, empty or not an "
                                   "image format)")

@@ -102,3 +102,26 @@ def test_from_config_builds_what_the_config_describes_and_survives_a_checkpoint(
     back = SOM.load(tmp_path / "m.safetensors")
     assert (back.rows, back.cols, back.topology, back.toroidal) == (cfg.rows, cfg.cols, cfg.topology, cfg.toroidal)
     assert torch.equal(back.weight, som.weight)
+
+
+@pytest.mark.parametrize("how", ["copy_", "load_state_dict", "assign", "parameter"])
+def test_user_set_weights_count_as_initialised_and_fit_keeps_them(how):
+    x = torch.rand(60, 3, generator=torch.Generator().manual_seed(0))
+    w0 = torch.rand(1, 12, 3, generator=torch.Generator().manual_seed(1))
+    som = SOM(3, 4, 3, seed=0)
+    assert not som.initialized
+    if how == "copy_":
+        with torch.no_grad():
+            som.weight.copy_(w0)
+    elif how == "load_state_dict":
+        som.load_state_dict({"weight": w0})
+    elif how == "assign":
+        som.weight = w0
+    else:
+        som.weight = torch.nn.Parameter(w0.clone())
+    assert som.initialized
+    ref = SOM(3, 4, 3, seed=0)
+    ref.weight = w0
+    som.fit(x, mode="batch", epochs=2, progress=False)
+    ref.fit(x, mode="batch", epochs=2, progress=False)
+    assert torch.equal(som.weight, ref.weight)  # trained from w0, not re-initialised

@@ -80,3 +80,34 @@ def test_identical_maps_give_identical_checkpoint_bytes(tmp_path):
         digests.add(hashlib.sha256(path.read_bytes()).hexdigest())
     assert len(digests) == 1
     assert torch.equal(SOM.load(tmp_path / "m0.safetensors").weight, som.weight)
+
+
+def test_huge_shapes_in_npy_npz_and_png_headers_are_refused_before_reading(tmp_path):
+    import struct
+    import zipfile
+    import zlib
+
+    # a 128-byte .npy claiming 100000 x 100000 float32
+    header = "{'descr': '<f4', 'fortran_order': False, 'shape': (100000, 100000), }"
+    header += " " * (118 - len(header) - 1) + "\n"
+    p = tmp_path / "huge.npy"
+    p.write_bytes(b"\x93NUMPY\x01\x00" + struct.pack("<H", len(header)) + header.encode())
+    with pytest.raises(DataFileError, match="huge.npy.*100000, 100000"):
+        read_disparity(p)
+    # the same header as the member of an .npz
+    z = tmp_path / "huge.npz"
+    with zipfile.ZipFile(z, "w") as zf:
+        zf.writestr("disparity.npy", p.read_bytes())
+    with pytest.raises(DataFileError, match="huge.npz.*100000, 100000"):
+        read_disparity(z)
+    # a PNG whose IHDR claims 100000 x 100000
+    ihdr = struct.pack(">IIBBBBB", 100000, 100000, 16, 0, 0, 0, 0)
+    chunk = struct.pack(">I", len(ihdr)) + b"IHDR" + ihdr + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr))
+    png = tmp_path / "huge.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk)
+    with pytest.raises(DataFileError, match="huge.png.*100000x100000"):
+        read_disparity(png)
+    short = tmp_path / "short.png"
+    short.write_bytes(b"\x89PNG\r\n\x1a\n" + b"\x00" * 4)
+    with pytest.raises(DataFileError, match="short.png"):
+        read_disparity(short)

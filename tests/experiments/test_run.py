@@ -200,3 +200,54 @@ def test_stereo_pair_with_half_a_camera_fails_before_output(shared_data, tmp_pat
         cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode != 0 and "data.baseline" in proc.stderr
     assert not (tmp_path / "metrics.json").exists()
+
+
+def test_two_runs_started_together_keep_both_results(tmp_path):
+    """Issue 14 item 10: two runs into the same output root in the same second each keep their own
+    folder, run.log and metrics.json."""
+    import os
+
+    cmd = [sys.executable, "-m", "experiments.run", f"paths.output_dir={tmp_path}", "output.pointcloud=false",
+           "output.tensorboard=false", "output.maps=false", "output.checkpoint=false", "train.epochs=2"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    procs = [subprocess.Popen(cmd + [f"seed={s}"], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for s in (1, 2)]
+    for p in procs:
+        _, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err[-2000:]
+    runs = sorted((tmp_path / "run" / "motorcycle").iterdir())
+    assert len(runs) == 2
+    seeds = sorted(json.loads((r / "metrics.json").read_text())["members"][0]["seed"] for r in runs)
+    assert seeds == [1, 2]
+    assert not [p for r in runs for p in r.iterdir() if p.name.startswith((".partial-", ".lock"))]
+
+
+def test_a_folder_held_by_a_run_refuses_a_second_writer(tmp_path):
+    from somtorch.atomic import exclusive_folder
+
+    with exclusive_folder(tmp_path) as lock:
+        assert lock.exists()
+        with pytest.raises(RuntimeError, match="being written by another run"):
+            with exclusive_folder(tmp_path):
+                pass
+    assert not lock.exists()
+
+
+def test_a_run_killed_with_sigterm_leaves_no_staging_folder(tmp_path):
+    """Issue 14 item 11: SIGTERM removes the staging folder (and the lock) of the main job."""
+    import os
+    import signal
+    import time
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    p = subprocess.Popen([sys.executable, "-m", "experiments.run", f"hydra.run.dir={tmp_path}", "ensemble=30"],
+                         cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.time()
+    while not list(tmp_path.glob(".partial-*")) and time.time() - t0 < 120 and p.poll() is None:
+        time.sleep(0.05)
+    assert p.poll() is None, "the run ended before it could be killed"
+    p.send_signal(signal.SIGTERM)
+    p.communicate(timeout=120)
+    assert p.returncode == 128 + signal.SIGTERM
+    assert not list(tmp_path.glob(".partial-*")) and not (tmp_path / ".lock").exists()
+    assert not (tmp_path / "metrics.json").exists()
