@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from somtorch.disparity.io import parse_middlebury_calib, read_json
@@ -114,6 +115,10 @@ def read_middlebury_camera(path: str | Path) -> Camera:
     missing = [k for k in ("cam0", "baseline") if k not in calib]
     if missing:
         raise DataFileError(path, f"calibration lacks {missing}; found keys {sorted(calib)}")
+    for key in ("cam0", "cam1"):
+        m = calib.get(key)
+        if key in calib and not (isinstance(m, np.ndarray) and m.shape == (3, 3)):
+            raise DataFileError(path, f"field {key!r} must be a 3x3 matrix like [f 0 cx; 0 f cy; 0 0 1]; got {m!r}")
     k0 = calib["cam0"]
     doffs = calib.get("doffs", float(calib["cam1"][0, 2] - k0[0, 2]) if "cam1" in calib else 0.0)
     return _camera(path, focal_px=float(k0[0, 0]), cx=float(k0[0, 2]), cy=float(k0[1, 2]),
@@ -165,6 +170,11 @@ def _oakd_camera(folder: Path, hw: tuple[int, int]) -> tuple[Camera | None, str 
     missing = [k for k in ("width", "height", "fx", "cx0", "cx1", "cy", "baseline_meters") if k not in calib]
     if missing:
         raise DataFileError(path, f"calibration lacks {missing}; found keys {sorted(calib)}")
+    bad = [k for k in ("width", "height", "fx", "cx0", "cx1", "cy", "baseline_meters")
+           if isinstance(calib[k], bool) or not isinstance(calib[k], int | float)]
+    if bad:
+        raise DataFileError(path, f"calibration field(s) {bad} must be numbers; got "
+                                  f"{ {k: calib[k] for k in bad} }")
     _check_calib_size(path, (calib["height"], calib["width"]), hw)
     cam = _camera(path, focal_px=calib["fx"], cx=calib["cx0"], cy=calib["cy"],
                   baseline=calib["baseline_meters"], baseline_unit="m", doffs=calib["cx1"] - calib["cx0"])

@@ -57,7 +57,8 @@ def test_oakd_json_gives_the_camera_in_metres(tmp_path):
 
 
 @pytest.mark.parametrize("over, words", [
-    ({"fx": None}, ["stereodemo_calibration.json", "invalid calibration"]),
+    ({"fx": None}, ["stereodemo_calibration.json", "fx", "must be numbers"]),
+    ({"fx": -3.0}, ["stereodemo_calibration.json", "invalid calibration"]),
     ({"width": 320}, ["stereodemo_calibration.json", "480x320"]),
 ])
 def test_oakd_json_errors_name_the_file(tmp_path, over, words):
@@ -71,4 +72,14 @@ def test_oakd_json_errors_name_the_file(tmp_path, over, words):
 def test_oakd_json_missing_keys_are_listed(tmp_path):
     (tmp_path / "stereodemo_calibration.json").write_text(json.dumps({"width": 640}))
     with pytest.raises(DataFileError, match="lacks"):
+        _oakd_camera(tmp_path, (480, 640))
+
+
+def test_a_camera_matrix_that_is_not_a_matrix_and_non_numeric_fields_name_the_field(tmp_path):
+    p = tmp_path / "calib.txt"
+    p.write_text(CALIB.replace("cam0=[1000.5 0 300.25; 0 1000.5 200.75; 0 0 1]", "cam0=5"))
+    with pytest.raises(DataFileError, match=r"calib.txt.*'cam0' must be a 3x3 matrix"):
+        read_middlebury_camera(p)
+    _oakd(tmp_path, cx0="left")
+    with pytest.raises(DataFileError, match=r"stereodemo_calibration.json.*cx0.*must be numbers"):
         _oakd_camera(tmp_path, (480, 640))
