@@ -31,6 +31,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp creates 0600; give the file the usual mode
     try:
         yield tmp_path
+        os.chmod(tmp_path, 0o666 & ~_UMASK)  # again: a writer may have replaced the file (safetensors does)
         os.replace(tmp_path, target)
     except BaseException:
         tmp_path.unlink(missing_ok=True)

@@ -83,3 +83,18 @@ def test_write_json_failure_keeps_the_previous_file(tmp_path):
         write_json(path, {"run": object()})  # not serialisable
     assert json.loads(path.read_text()) == {"run": 1}
     assert [p.name for p in tmp_path.iterdir()] == ["m.json"]
+
+
+def test_checkpoints_get_the_usual_file_mode(tmp_path):
+    import os
+    import stat
+
+    import torch
+
+    from somtorch import SOM
+    from somtorch.atomic import _UMASK
+
+    path = SOM(2, 2, 3).save(tmp_path / "m.safetensors")
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o666 & ~_UMASK
+    assert stat.S_IMODE(os.stat(path.with_suffix(".json")).st_mode) == 0o666 & ~_UMASK
+    assert torch.equal(SOM.load(path).weight, torch.zeros(1, 4, 3))
