@@ -72,6 +72,10 @@ class SGBMParams:
                 continue
             if isinstance(value, bool) or not isinstance(value, numbers.Integral):
                 raise TypeError(f"SGBMParams.{f.name} must be an int; got {type(value).__name__} {value!r}")
+        for f in dataclasses.fields(self):  # OpenCV takes C ints: larger values overflow inside it
+            value = getattr(self, f.name)
+            if isinstance(value, numbers.Integral) and not -(2**31) <= value < 2**31:
+                raise ValueError(f"SGBMParams.{f.name}={value} does not fit a 32-bit int")
         if self.numDisparities <= 0 or self.numDisparities % 16:
             raise ValueError(f"SGBMParams.numDisparities must be a positive multiple of 16; got "
                              f"{self.numDisparities} (try {max(16, (self.numDisparities + 15) // 16 * 16)})")
@@ -171,8 +175,12 @@ def compute_disparity(
         raise ValueError(f"left and right must have the same shape; got left {tuple(left.shape)}, "
                          f"right {tuple(right.shape)}")
     if lt.shape[1] <= params.minDisparity + params.numDisparities:
-        log.warning("image width %d <= minDisparity + numDisparities (%d): no pixel can be matched",
-                    lt.shape[1], params.minDisparity + params.numDisparities)
+        raise ValueError(f"the images are {lt.shape[1]} px wide but minDisparity + numDisparities = "
+                         f"{params.minDisparity + params.numDisparities}: no pixel can be matched (OpenCV would "
+                         "fail to allocate); lower numDisparities below the image width")
+    if params.blockSize > min(lt.shape[:2]):
+        raise ValueError(f"SGBMParams.blockSize={params.blockSize} is larger than the images "
+                         f"({lt.shape[0]}x{lt.shape[1]}); use a smaller odd block size")
     channels = 1 if lt.ndim == 2 else lt.shape[2]
     raw = params.create_matcher(channels).compute(lt, rt)  # (H, W) int16, disparity * 16
     valid = (raw >= params.minDisparity * _FIXED_POINT) & (raw > 0)

@@ -106,3 +106,17 @@ def test_params_from_dict():
         SGBMParams.from_dict({"numDisp": 64})
     with pytest.raises(ValueError, match="mode code 9"):
         SGBMParams.from_dict({"mode": 9})
+
+
+def test_parameters_that_opencv_cannot_take_fail_with_a_clear_message():
+    import numpy as np
+
+    from somtorch.disparity.stereo import SGBMParams, compute_disparity
+
+    narrow = np.zeros((40, 100), dtype=np.uint8)
+    with pytest.raises(ValueError, match="100 px wide.*numDisparities"):
+        compute_disparity(narrow, narrow, SGBMParams(numDisparities=128))
+    with pytest.raises(ValueError, match="blockSize=51 is larger"):
+        compute_disparity(narrow, narrow, SGBMParams(numDisparities=16, blockSize=51))
+    with pytest.raises(ValueError, match="32-bit"):
+        SGBMParams(uniquenessRatio=2**40)
