@@ -75,7 +75,10 @@ def load(cls: type[SOM], path: str | os.PathLike, *, device=None) -> SOM:
                   device=device)
     except (KeyError, TypeError, ValueError, AttributeError) as err:
         raise DataFileError(wpath, f"broken hyper-parameters in the metadata ({err!r})") from err
-    som.set_weight(weight)
+    try:
+        som.set_weight(weight)
+    except (TypeError, ValueError) as err:  # NaN / inf weights, a non-float tensor
+        raise DataFileError(wpath, f"unusable weights: {err}") from None
     som.initialized = bool(cfg.get("initialized", True))
     return som
 
