@@ -161,9 +161,12 @@ def main(dcfg: DictConfig) -> dict:
 
     from somtorch.atomic import commit_staged, write_bytes, write_json
 
-    cfg: ScenesConfig = OmegaConf.to_object(dcfg)
-    out = Path(HydraConfig.get().runtime.output_dir)
-    results = evaluate(cfg)
+    from experiments.schema import one_line_errors
+
+    with one_line_errors(log):
+        cfg: ScenesConfig = OmegaConf.to_object(dcfg)
+        out = Path(HydraConfig.get().runtime.output_dir)
+        results = evaluate(cfg)
     out.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out))
     try:

@@ -74,12 +74,12 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     from somtorch.pipeline import run_pipeline
 
     t_start = time.perf_counter()
+    if not 0 <= cfg.output.member < cfg.runs:  # checked before any file is read
+        raise ValueError(f"output.member={cfg.output.member} must be in [0, runs={cfg.runs}) (ensemble="
+                         f"{cfg.ensemble}, method={cfg.method!r})")
     scene = load_input(cfg)
     if cfg.object_id is not None and scene.objects is None:
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
-    if not 0 <= cfg.output.member < cfg.runs:
-        raise ValueError(f"output.member={cfg.output.member} must be in [0, runs={cfg.runs}) (ensemble="
-                         f"{cfg.ensemble}, method={cfg.method!r})")
     out_dir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     writer = None
@@ -146,14 +146,16 @@ def _log_hparams(writer, cfg: RunConfig, metrics: dict) -> None:
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="run")
 def main(dcfg: DictConfig) -> dict:
     """Hydra entry point."""
+    from experiments.schema import one_line_errors
     from somtorch.atomic import exclusive_folder, exit_cleanly_on_sigterm
 
-    cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
-    out_dir = Path(HydraConfig.get().runtime.output_dir)
-    exit_cleanly_on_sigterm()  # a killed run removes its staging folder
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with exclusive_folder(out_dir):  # two runs never write into one folder
-        return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
+    with one_line_errors(log):
+        cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
+        out_dir = Path(HydraConfig.get().runtime.output_dir)
+        exit_cleanly_on_sigterm()  # a killed run removes its staging folder
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with exclusive_folder(out_dir):  # two runs never write into one folder
+            return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
 
 
 if __name__ == "__main__":

@@ -6,6 +6,11 @@ library and the configs cannot drift apart.
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import os
+import sys
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
@@ -64,3 +69,22 @@ def register() -> None:
     """Register the schemas in Hydra's ConfigStore (idempotent)."""
     cs = ConfigStore.instance()
     cs.store(name="run_schema", node=RunConfig)
+
+
+@contextlib.contextmanager
+def one_line_errors(log: logging.Logger) -> Iterator[None]:
+    """Bad input at the command line ends in one line (the message and a hint), exit status 2; the
+    full traceback with ``HYDRA_FULL_ERROR=1``. Unexpected errors keep their traceback."""
+    from omegaconf.errors import OmegaConfBaseException
+
+    from somtorch.validation import SomtorchError
+
+    try:
+        yield
+    except (ValueError, TypeError, FileNotFoundError, RuntimeError, SomtorchError, OmegaConfBaseException) as err:
+        if os.environ.get("HYDRA_FULL_ERROR") == "1":
+            raise
+        msg = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        log.error("%s: %s", type(err).__name__, msg)  # into run.log
+        print(f"error: {msg} (the full traceback: HYDRA_FULL_ERROR=1)", file=sys.stderr)
+        raise SystemExit(2) from None

@@ -263,9 +263,12 @@ ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
 def main(dcfg: DictConfig) -> int:
     from somtorch.atomic import write_bytes, write_json
 
-    cfg: ValidateConfig = OmegaConf.to_object(dcfg)
-    out = Path(HydraConfig.get().runtime.output_dir)
-    report = evaluate(cfg)
+    from experiments.schema import one_line_errors
+
+    with one_line_errors(log):
+        cfg: ValidateConfig = OmegaConf.to_object(dcfg)
+        out = Path(HydraConfig.get().runtime.output_dir)
+        report = evaluate(cfg)
     write_json(out / "validate.json", report)
     write_bytes(out / "validate.md", to_markdown(report).encode())
     t = report["totals"]

@@ -95,8 +95,7 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     # refine by least squares on the inliers of the lower half, then recompute on the full map
     inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
     if int(inl.sum()) >= 3:
-        X = torch.cat([pts[inl, :2], torch.ones(int(inl.sum()), 1, dtype=torch.float64)], 1)
-        best = torch.linalg.lstsq(X, pts[inl, 2:]).solution.squeeze(-1)
+        best = _plane_fit(pts[inl])
     a, b, c = (float(v) for v in best)
     if b < min_b or abs(a) > b * w / h:
         return None
@@ -139,3 +138,15 @@ def _follows_slope(disparity: torch.Tensor, ok: torch.Tensor, b: float, tol: flo
     both = ok[2 * k:] & ok[:-2 * k]
     out[k:h - k] = ~both | ((diff - 2 * k * b).abs() < 2 * tol)
     return out
+
+
+def _plane_fit(pts: torch.Tensor) -> torch.Tensor:
+    """Least-squares ``(a, b, c)`` of ``d = a·x + b·y + c`` through ``pts`` ``(N, 3)`` rows (x, y, d),
+    by the 3 × 3 normal equations from element-wise float64 sums: the same bits on every run
+    (``torch.linalg.lstsq`` differed in the last digits between identical runs)."""
+    x, y, d = pts[:, 0].double(), pts[:, 1].double(), pts[:, 2].double()
+    one = torch.ones_like(x)
+    cols = (x, y, one)
+    ata = torch.tensor([[float((u * v).sum()) for v in cols] for u in cols], dtype=torch.float64)
+    atb = torch.tensor([float((u * d).sum()) for u in cols], dtype=torch.float64)
+    return torch.linalg.solve(ata, atb)

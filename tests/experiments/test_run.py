@@ -251,3 +251,17 @@ def test_a_run_killed_with_sigterm_leaves_no_staging_folder(tmp_path):
     assert p.returncode == 128 + signal.SIGTERM
     assert not list(tmp_path.glob(".partial-*")) and not (tmp_path / ".lock").exists()
     assert not (tmp_path / "metrics.json").exists()
+
+
+@pytest.mark.parametrize("override, words", [
+    ("som.rows=0", ["som.rows", "[1, inf)"]),
+    ("objects.select=bogus", ["objects.select", "salient"]),
+    ("output.member=5", ["output.member"]),
+])
+def test_bad_input_ends_in_one_line_on_stderr_and_exit_status_2(tmp_path, override, words):
+    proc = _run(tmp_path, override)
+    assert proc.returncode == 2, proc.stderr[-500:]
+    err = proc.stderr.strip()
+    assert "Traceback" not in err and len(err.splitlines()) == 1 and err.startswith("error: ")
+    for w in words:
+        assert w in err
