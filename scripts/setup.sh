@@ -20,9 +20,11 @@ if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
 fi
 
 # 2. Virtual environment.
-[ -x .venv/bin/python ] || "$PY" -m venv .venv
 VPY=.venv/bin/python
-$VPY -m pip install -q --upgrade pip >/dev/null 2>&1 || true
+if [ ! -x "$VPY" ]; then
+  "$PY" -m venv .venv
+  $VPY -m pip install -q --upgrade pip >/dev/null 2>&1 || true
+fi
 
 # 3. torch 2.13.0, CPU build, before anything else.
 if ! $VPY -c 'import torch, sys; sys.exit(0 if torch.__version__.startswith("2.13.0") else 1)' 2>/dev/null; then
@@ -36,7 +38,14 @@ if ! $VPY -c 'import torch, sys; sys.exit(0 if torch.__version__.startswith("2.1
   fi
 fi
 
-# 4. The project and its other dependencies (torch already satisfies the range).
+# 4. The project and its other dependencies (torch already satisfies the range), once: a stamp of
+#    what was installed (pyproject.toml + extra) lets later commands start at once.
+STAMP=.venv/.somtorch-setup
+WANT="$EXTRA $(sha256sum pyproject.toml | cut -c1-16)"
+if [ "$(cat "$STAMP" 2>/dev/null)" = "$WANT" ] && $VPY -c 'import somtorch' 2>/dev/null; then
+  exit 0
+fi
 echo "[setup] installing somtorch[$EXTRA]"
-$VPY -m pip install -q -e ".[$EXTRA]" 2>&1 | grep -v -E "^WARNING: Location|is ignored" || true
+$VPY -m pip install -q -e ".[$EXTRA]" 2>&1 | grep -v -E "^WARNING: Location|is ignored|^ " || true  # drop setuptools banners
 $VPY -c 'import somtorch, torch; print(f"[setup] ok: somtorch {somtorch.__version__}, torch {torch.__version__}")'
+echo "$WANT" > "$STAMP"
