@@ -21,7 +21,6 @@ and ``results.md`` into the Hydra run folder, both staged and moved in only when
 from __future__ import annotations
 
 import logging
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -99,9 +98,6 @@ def score_scene(scene: Any, members: list, cfg: ScenesConfig) -> dict[str, Any]:
 
 def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
     """Run every scene (all files read first); returns the content of ``metrics.json``."""
-    from somtorch.config import PipelineConfig
-    from dataclasses import fields
-
     from somtorch.pipeline import run_pipeline
 
     specs = dev_scenes(cfg.scenes, cfg.scene_list)
@@ -109,11 +105,10 @@ def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
         specs = [s for s in specs if s.junk is None]
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
     scenes = [load_dev_scene(s, data_dir) for s in specs]  # every file checked before any training
-    pcfg = PipelineConfig(**{f.name: getattr(cfg, f.name) for f in fields(PipelineConfig)})
     rows = []
     for spec, scene in zip(specs, scenes):
         t0 = time.perf_counter()
-        res = run_pipeline(scene, pcfg, metrics=False)
+        res = run_pipeline(scene, cfg, metrics=False)
         row = {"scene": spec.name, "folder": spec.folder, "disparity": spec.disparity, "junk": spec.junk,
                "grid": f"{cfg.som.rows}x{cfg.som.cols}", "mode": "OR" if cfg.features.train_stride > 1 else "NOR",
                "train_px": len(res.train_features), "ground_found": res.ground is not None,
@@ -157,24 +152,14 @@ def to_markdown(results: dict[str, Any]) -> str:
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="real_scenes")
 def main(dcfg: DictConfig) -> dict:
-    import shutil
-
-    from somtorch.atomic import commit_staged, write_bytes, write_json
-
     from experiments.schema import one_line_errors
+    from somtorch.atomic import write_staged
 
     with one_line_errors(log):
         cfg: ScenesConfig = OmegaConf.to_object(dcfg)
         out = Path(HydraConfig.get().runtime.output_dir)
         results = evaluate(cfg)
-    out.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out))
-    try:
-        write_bytes(stage / "results.md", to_markdown(results).encode())
-        write_json(stage / "metrics.json", results)
-        commit_staged(stage, out)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
+    write_staged(out, {"results.md": to_markdown(results).encode(), "metrics.json": results})
     log.info("tables in %s", out / "results.md")
     return results
 

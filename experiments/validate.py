@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
@@ -64,25 +64,34 @@ class SceneCache:
     def __init__(self, spec: Any, scene: Any, base: Any) -> None:
         self.spec, self.scene, self.base = spec, scene, base
         self._seg: dict[str, Any] = {}
+        self._target: Any = None  # the scene's all-objects target, computed once
         self.scores: dict[str, dict[str, Any]] = {}
 
-    def score(self, overrides: dict[str, Any]) -> dict[str, Any]:
+    def members(self, overrides: dict[str, Any]) -> tuple[Any, list]:
+        """``(ground plane, member results)`` of the base config with ``overrides``; the segmentation
+        is computed once per upstream setting (features, ground, SOM, training)."""
         from somtorch.config import with_overrides
-        from somtorch.evaluation import all_objects, ground_object_share
         from somtorch.pipeline import detect, prepare
         from somtorch.segmenters import run_segmenter
 
-        key = _key(overrides)
-        if key in self.scores:
-            return self.scores[key]
         cfg = with_overrides(self.base, overrides)
         up = _key({k: v for k, v in overrides.items() if k.split(".")[0] in UPSTREAM})
         if up not in self._seg:
             valid, ground, usable, feats, train = prepare(self.scene, cfg)
             self._seg[up] = (ground, run_segmenter(feats, train, self.scene, usable, cfg))
         ground, seg = self._seg[up]
-        members = detect(self.scene, seg, ground, cfg)
-        target = all_objects(self.scene)
+        return ground, detect(self.scene, seg, ground, cfg)
+
+    def score(self, overrides: dict[str, Any]) -> dict[str, Any]:
+        from somtorch.evaluation import all_objects, ground_object_share
+
+        key = _key(overrides)
+        if key in self.scores:
+            return self.scores[key]
+        ground, members = self.members(overrides)
+        if self._target is None:
+            self._target = all_objects(self.scene)
+        target = self._target
         s = [m.score for m in members]
         self.scores[key] = {
             "runs": len(s), "useful_hits": sum(x.useful_hit for x in s),
@@ -104,17 +113,10 @@ class SceneCache:
         import matplotlib.pyplot as plt
         import numpy as np
 
-        from somtorch.config import with_overrides
-        from somtorch.pipeline import detect, prepare
-        from somtorch.segmenters import run_segmenter
-
-        cfg = with_overrides(self.base, dict(overrides or {}, ensemble=max(self.base.ensemble, member + 1)))
-        up = _key({k: v for k, v in (overrides or {}).items() if k.split(".")[0] in UPSTREAM})
-        if up not in self._seg:
-            valid, ground, usable, feats, train = prepare(self.scene, cfg)
-            self._seg[up] = (ground, run_segmenter(feats, train, self.scene, usable, cfg))
-        ground, seg = self._seg[up]
-        m = detect(self.scene, seg, ground, cfg)[member]
+        if not 0 <= member < self.base.ensemble:
+            raise ValueError(f"gallery member {member} must be in [0, ensemble={self.base.ensemble})")
+        ground, members = self.members(overrides or {})
+        m = members[member]
         sc = self.scene
         d = np.where(sc.valid.numpy(), sc.disparity.numpy(), np.nan)
         fig, ax = plt.subplots(figsize=(7.5, 7.5 * sc.height / sc.width + 0.8), dpi=64)
@@ -189,12 +191,11 @@ def _default_of(cfg: Any, key: str) -> Any:
 def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     """Run the protocol of the module docstring; returns the JSON-ready report."""
     from experiments.scenes import dev_scenes, load_dev_scene
-    from somtorch.config import PipelineConfig
 
     specs = dev_scenes(cfg.scenes)
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
     grid = {k: list(v) for k, v in cfg.grid.items()}
-    base = PipelineConfig(**{f.name: getattr(cfg, f.name) for f in fields(PipelineConfig)})
+    base = cfg  # a ValidateConfig is a PipelineConfig: the extra fields do not reach the pipeline
     defaults = {k: _default_of(base, k) if "+" not in k else [_default_of(base, n) for n in k.split("+")]
                 for k in grid}
     caches = []
@@ -261,16 +262,14 @@ ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="validate")
 def main(dcfg: DictConfig) -> int:
-    from somtorch.atomic import write_bytes, write_json
-
     from experiments.schema import one_line_errors
+    from somtorch.atomic import write_staged
 
     with one_line_errors(log):
         cfg: ValidateConfig = OmegaConf.to_object(dcfg)
         out = Path(HydraConfig.get().runtime.output_dir)
         report = evaluate(cfg)
-    write_json(out / "validate.json", report)
-    write_bytes(out / "validate.md", to_markdown(report).encode())
+    write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": report})
     t = report["totals"]
     log.info("useful hits: default %d, in-sample %d, left-out %d of %d; tables in %s", t["default"]["useful_hits"],
              t["in_sample"]["useful_hits"], t["left_out"]["useful_hits"], t["default"]["runs"], out / "validate.md")

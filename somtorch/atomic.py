@@ -91,3 +91,22 @@ def exclusive_folder(folder: str | os.PathLike, name: str = ".lock") -> Iterator
         yield path
     finally:
         path.unlink(missing_ok=True)
+
+
+def write_staged(out_dir: str | os.PathLike, files: dict[str, bytes | Any], last: str | None = None) -> None:
+    """Write ``{name: bytes or JSON-ready object}`` into ``out_dir`` through a staging folder, the
+    last entry of ``files`` (or ``last``) moved in last: a killed writer leaves no partial result."""
+    import shutil
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out))
+    try:
+        for name, content in files.items():
+            if isinstance(content, bytes):
+                write_bytes(stage / name, content)
+            else:
+                write_json(stage / name, content)
+        commit_staged(stage, out, last=last or list(files)[-1])
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)

@@ -160,9 +160,6 @@ class GroundConfig(Validated):
             valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
             (disparity below the band); a ramp, a lattice or a plane through the objects fails
             (1 = no check).
-        below_penalty: RANSAC scores a hypothesis by its inliers minus ``below_penalty ×`` the
-            sampled points behind it, so the support surface beats a plane through the objects
-            (0 = inliers only).
         slope_rows: a ground pixel must also rise down the image like the plane, measured over
             ``slope_rows ×`` the image height above and below it, so the vertical surfaces that
             cross the plane's band (an object's base, legs) stay out of the mask (0 = off).
@@ -175,7 +172,7 @@ class GroundConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "enabled": BOOL, "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_top_frac": FRACTION, "max_below_frac": FRACTION,
-        "below_penalty": NON_NEGATIVE, "slope_rows": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
+        "slope_rows": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
     }
 
     enabled: bool = True
@@ -185,7 +182,6 @@ class GroundConfig(Validated):
     min_slope_frac: float = 0.25
     max_top_frac: float = 0.15
     max_below_frac: float = 0.1
-    below_penalty: float = 0.0
     slope_rows: float = 0.0
     iterations: int = 200
     sample: int = 5000

@@ -37,8 +37,6 @@ def summary_stats(values: list[float]) -> dict[str, float | int | None]:
             "median": float(np.median(a))}
 
 
-_stats = summary_stats
-
 
 @dataclass
 class AllObjects:
@@ -156,8 +154,8 @@ def summarize_runs(runs: dict[str, list], x_opt: float | None) -> dict[str, Any]
     """The Table 1 / Table 2 numbers of one job from its per-run values."""
 
     n = len(runs["seed"])
-    out: dict[str, Any] = {"runs": n, "reduction_all": _stats(runs["reduction_union"]),
-                           "runtime_s": _stats(runs["runtime_s"]), "area_frac": _stats(runs["area_frac"])}
+    out: dict[str, Any] = {"runs": n, "reduction_all": summary_stats(runs["reduction_union"]),
+                           "runtime_s": summary_stats(runs["runtime_s"]), "area_frac": summary_stats(runs["area_frac"])}
     if "identified_fraction" not in runs:
         return out
     id100, id95, useful = runs["identified_100"], runs["identified_95"], runs["useful_hit"]
@@ -169,11 +167,11 @@ def summarize_runs(runs: dict[str, list], x_opt: float | None) -> dict[str, Any]
         "x_opt": x_opt,
         "mean_identified_fraction": float(sum(runs["identified_fraction"]) / n),
         # Table 2: over the runs with complete identification (the paper), and over the >= 95 % runs
-        "reduction_complete": _stats(pick("reduction_union", id100)),
-        "reduction_crops_complete": _stats(pick("reduction_crops", id100)),
-        "reduction_95": _stats(pick("reduction_union", id95)),
-        "reduction_crops_95": _stats(pick("reduction_crops", id95)),
-        "segment_f1": _stats(runs["segment_f1"]), "area_precision": _stats(runs["area_precision"]),
+        "reduction_complete": summary_stats(pick("reduction_union", id100)),
+        "reduction_crops_complete": summary_stats(pick("reduction_crops", id100)),
+        "reduction_95": summary_stats(pick("reduction_union", id95)),
+        "reduction_crops_95": summary_stats(pick("reduction_crops", id95)),
+        "segment_f1": summary_stats(runs["segment_f1"]), "area_precision": summary_stats(runs["area_precision"]),
         # in [0, 1]: mean over runs of [>= 95 % identified] * min(1, reduction / x_opt) (Optuna's objective)
         "tradeoff": float(sum(tradeoff) / n),
     })

@@ -98,3 +98,17 @@ def test_checkpoints_get_the_usual_file_mode(tmp_path):
     assert stat.S_IMODE(os.stat(path).st_mode) == 0o666 & ~_UMASK
     assert stat.S_IMODE(os.stat(path.with_suffix(".json")).st_mode) == 0o666 & ~_UMASK
     assert torch.equal(SOM.load(path).weight, torch.zeros(1, 4, 3))
+
+
+def test_write_staged_moves_everything_in_with_the_last_entry_last(tmp_path):
+    import json
+
+    from somtorch.atomic import write_staged
+
+    write_staged(tmp_path, {"a.md": b"table\n", "metrics.json": {"x": 1}})
+    assert (tmp_path / "a.md").read_bytes() == b"table\n"
+    assert json.loads((tmp_path / "metrics.json").read_text()) == {"x": 1}
+    assert not list(tmp_path.glob(".partial-*"))
+    with pytest.raises(ValueError):  # NaN is not JSON: nothing lands, no staging folder stays
+        write_staged(tmp_path / "bad", {"a.md": b"x", "metrics.json": {"x": float("nan")}})
+    assert not list((tmp_path / "bad").iterdir())

@@ -87,10 +87,7 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     if not bool(plausible.any()):
         return None
     pred = coef[:, 0:1] * pts[None, :, 0] + coef[:, 1:2] * pts[None, :, 1] + coef[:, 2:3]
-    score = ((pred - pts[None, :, 2]).abs() < tol).sum(1).double()
-    if cfg.below_penalty > 0:  # a support surface hides what lies beneath it: points behind it are evidence against
-        score = score - cfg.below_penalty * (pts[None, :, 2] < pred - tol).sum(1).double()
-    score = score.masked_fill(~plausible, -float("inf"))
+    score = ((pred - pts[None, :, 2]).abs() < tol).sum(1).masked_fill(~plausible, -1)
     best = coef[int(score.argmax())]
     # refine by least squares on the inliers of the lower half, then recompute on the full map
     inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
