@@ -16,13 +16,20 @@ and ``results.md`` into the Hydra run folder, both staged and moved in only when
     python -m experiments.real_scenes 'scenes=[kitti_est,motorcycle_q_sgbm,eth3d_terrace_sgbm,flyingthings3d_sgbm]'
     python -m experiments.real_scenes scene_list=unlabelled objects.min_solidity=0
     python -m experiments.real_scenes +preset=paper
+    python -m experiments.real_scenes 'methods=[som,uv_disparity,dsw]'   # the task-level baselines beside it
+
+``methods``: ``som`` is the configured pipeline (any ``method=`` segmenter); ``uv_disparity`` and
+``dsw`` are the baselines of :mod:`somtorch.tasks.baselines` (deterministic: one run per scene;
+``dsw`` needs a metric camera and is skipped where the scene has none), scored the same way. Every
+scored row also carries the salient-object metrics (F-measure, MAE, S-measure of the kept mask
+against the union of the labelled objects, :mod:`somtorch.saliency_metrics`), means over the runs.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
@@ -49,6 +56,7 @@ class ScenesConfig(RunConfig):
     scene_list: str = "dev"
     scenes: Optional[list[str]] = None
     junk_bound: float = 0.25
+    methods: list[str] = field(default_factory=lambda: ["som"])
 
 
 ConfigStore.instance().store(name="real_scenes_schema", node=ScenesConfig)
@@ -65,11 +73,11 @@ def score_scene(scene: Any, members: list, cfg: ScenesConfig) -> dict[str, Any]:
     from somtorch.evaluation import all_objects, summary_stats
     from somtorch.tasks.scoring import score_reduction
 
-    found = [m for m in members if not m.no_object]
-    row: dict[str, Any] = {"runs": len(members), "no_object": len(members) - len(found),
+    found = [m for m in members if not m.no_object and m.kept]
+    row: dict[str, Any] = {"runs": len(members), "no_object": sum(bool(m.no_object) for m in members),
                            "kept_areas_mean": sum(len(m.kept) for m in members) / len(members)}
-    purity = [m.kept[0].purity for m in found]
-    solid = [m.kept[0].solidity for m in found]
+    purity = [m.kept[0].purity for m in found if m.kept[0].purity is not None]
+    solid = [m.kept[0].solidity for m in found if m.kept[0].solidity is not None]
     row.update({"low_purity": sum(p < cfg.junk_bound for p in purity),
                 "low_solidity": sum(s < cfg.junk_bound for s in solid),
                 "median_purity": _median(purity), "median_solidity": _median(solid)})
@@ -84,6 +92,7 @@ def score_scene(scene: Any, members: list, cfg: ScenesConfig) -> dict[str, Any]:
         "mean_identified_fraction": sum(s.identified_fraction for s in scores) / len(scores),
         "reduction_95": summary_stats([s.reduction_union for s in scores if s.identified_95]),
         "x_opt": scores[0].x_opt, "per_object": {},
+        "saliency": _saliency(scene, members),
     })
     for info in scene.object_info:
         mask = scene.object_mask(info.id)
@@ -96,6 +105,54 @@ def score_scene(scene: Any, members: list, cfg: ScenesConfig) -> dict[str, Any]:
     return row
 
 
+def _saliency(scene: Any, members: list) -> dict[str, float]:
+    """Mean F-measure / MAE / S-measure of the kept masks against the union of the objects."""
+    from somtorch.saliency_metrics import saliency_scores
+
+    union = scene.objects > 0
+    per = [saliency_scores(m.reduction.mask, union) for m in members]
+    return {k: sum(p[k] for p in per) / len(per) for k in per[0]}
+
+
+@dataclass
+class BaselineRun:
+    """The one run of a deterministic baseline, shaped like a pipeline member for the scorers."""
+
+    reduction: Any
+    score: Any
+    kept: list = field(default_factory=list)
+    no_object: bool = False
+
+
+def run_baseline(name: str, scene: Any, cfg: ScenesConfig) -> list[BaselineRun] | None:
+    """The baseline ``name`` on ``scene`` (None where it does not apply: ``dsw`` without a metric
+    camera). ``uv_disparity`` keeps the obstacle of most pixels × disparity (the largest near
+    one), ``dsw`` its nearest proposal; the reduction's tolerance is the pipeline's."""
+    from somtorch.tasks.baselines import dsw_boxes, uv_disparity_boxes
+    from somtorch.tasks.reduction import reduce_map
+    from somtorch.tasks.scoring import score_reduction
+
+    if name == "uv_disparity":
+        found = uv_disparity_boxes(scene.disparity, scene.valid)
+        boxes = [max(found, key=lambda o: o.pixels * o.disparity).box] if found else []
+    elif name == "dsw":
+        cam = scene.camera
+        if cam is None or cam.baseline_unit not in ("m", "mm"):
+            return None
+        found = dsw_boxes(scene.disparity, scene.valid, cam.baseline / (1000.0 if cam.baseline_unit == "mm" else 1.0))
+        boxes = [found[0].box] if found else []
+    else:
+        raise ValueError(f"methods: unknown method {name!r}; known: som, uv_disparity, dsw")
+    r = cfg.reduction
+    if not boxes:  # nothing detected: keep the whole map, as the pipeline's fail-safe does
+        ys, xs = scene.valid.nonzero(as_tuple=True)
+        boxes = [(int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max()))]
+    red = reduce_map(boxes, scene.valid, tolerance_px=r.tolerance_px, tolerance_frac=r.tolerance_frac,
+                     tolerance_image=r.tolerance_image)
+    score = score_reduction(red, scene.main_object_mask, scene.valid) if scene.main_object_mask is not None else None
+    return [BaselineRun(red, score, no_object=not found)]
+
+
 def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
     """Run every scene (all files read first); returns the content of ``metrics.json``."""
     from somtorch.pipeline import run_pipeline
@@ -104,19 +161,31 @@ def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
     if cfg.scenes is None:
         specs = [s for s in specs if s.junk is None]
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
+    unknown = [m for m in cfg.methods if m not in ("som", "uv_disparity", "dsw")]
+    if unknown or not cfg.methods:
+        raise ValueError(f"methods={cfg.methods}: choose from som, uv_disparity, dsw")
     scenes = [load_dev_scene(s, data_dir) for s in specs]  # every file checked before any training
     rows = []
     for spec, scene in zip(specs, scenes):
-        t0 = time.perf_counter()
-        res = run_pipeline(scene, cfg, metrics=False)
-        row = {"scene": spec.name, "folder": spec.folder, "disparity": spec.disparity, "junk": spec.junk,
-               "grid": f"{cfg.som.rows}x{cfg.som.cols}", "mode": "OR" if cfg.features.train_stride > 1 else "NOR",
-               "train_px": len(res.train_features), "ground_found": res.ground is not None,
-               **score_scene(scene, res.members, cfg),
-               "timings_ms": {k: 1e3 * v for k, v in res.timings.items()}, "wall_s": time.perf_counter() - t0}
-        rows.append(row)
-        log.info("%s: %s", spec.name, ", ".join(f"{k} {row[k]}" for k in ("useful_hits", "all_objects_hits",
-                                                                            "low_solidity", "no_object") if k in row))
+        for method in cfg.methods:
+            t0 = time.perf_counter()
+            head = {"scene": spec.name, "method": method, "folder": spec.folder, "disparity": spec.disparity,
+                    "junk": spec.junk, "mode": "OR" if cfg.features.train_stride > 1 else "NOR"}
+            if method == "som":
+                res = run_pipeline(scene, cfg, metrics=False)
+                row = {**head, "grid": f"{cfg.som.rows}x{cfg.som.cols}", "train_px": len(res.train_features),
+                       "ground_found": res.ground is not None, **score_scene(scene, res.members, cfg),
+                       "timings_ms": {k: 1e3 * v for k, v in res.timings.items()}}
+            else:
+                runs = run_baseline(method, scene, cfg)
+                if runs is None:
+                    log.info("%s: %s skipped (no metric camera)", spec.name, method)
+                    continue
+                row = {**head, "mode": "all pixels", **score_scene(scene, runs, cfg)}
+            row["wall_s"] = time.perf_counter() - t0
+            rows.append(row)
+            log.info("%s [%s]: %s", spec.name, method, ", ".join(
+                f"{k} {row[k]}" for k in ("useful_hits", "all_objects_hits", "low_solidity", "no_object") if k in row))
     return {"schema": SCHEMA, "label": cfg.label, "scene_list": cfg.scene_list, "rows": rows,
             "config": OmegaConf.to_container(OmegaConf.structured(cfg))}
 
@@ -127,16 +196,22 @@ def to_markdown(results: dict[str, Any]) -> str:
     other = [r for r in results["rows"] if "useful_hits" not in r]
     lines = []
     if masked:
-        lines += ["| scene | preset | mode | runs | ≥95 % identified | 100 % | useful hits | all-objects hits | "
-                  "no object | mean reduction (≥95 % runs) | x_opt |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        lines += ["| scene | method | mode | runs | ≥95 % identified | 100 % | useful hits | all-objects hits | "
+                  "no object | mean reduction (≥95 % runs) | x_opt | F-measure | MAE | S-measure |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in masked:
             red = r["reduction_95"]["mean"]
-            lines.append(f"| {r['scene']} | {results['label']} | {r['mode']} | {r['runs']} | {r['identified_95']} | "
+            method = results["label"] if r.get("method", "som") == "som" else r["method"]
+            sal = r["saliency"]
+            lines.append(f"| {r['scene']} | {method} | {r['mode']} | {r['runs']} | {r['identified_95']} | "
                          f"{r['identified_100']} | {r['useful_hits']} | {r['all_objects_hits']} | {r['no_object']} | "
-                         f"{'–' if red is None else f'{red:.1f} %'} | {r['x_opt']:.1f} % |")
+                         f"{'–' if red is None else f'{red:.1f} %'} | {r['x_opt']:.1f} % | {sal['f_measure']:.3f} | "
+                         f"{sal['mae']:.3f} | {sal['s_measure']:.3f} |")
         lines += ["", "| scene | object | runs with ≥95 % identified | mean identified fraction |", "|---|---|---|---|"]
         for r in masked:
             for oid, o in r["per_object"].items():
+                if r.get("method", "som") != "som":
+                    continue
                 lines.append(f"| {r['scene']} | {oid}: {o['name']} | {o['identified_95']}/{r['runs']} | "
                              f"{o['mean_identified_fraction']:.2f} |")
     if other:

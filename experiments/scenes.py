@@ -12,6 +12,7 @@ from typing import Any, Optional
 
 SCENE_LISTS = Path(__file__).resolve().parents[1] / "conf" / "scene_lists"
 SCENES_FILE = SCENE_LISTS / "dev.yaml"
+LABELS = Path(__file__).resolve().parents[1] / "conf" / "labels"
 
 
 @dataclass
@@ -21,6 +22,9 @@ class SceneSpec:
     ``disparity``: ``"gt"`` (the folder's own map), a file name in the folder (e.g. KITTI's
     ``disp_est.png``), or ``"sgbm"``: computed from ``left`` / ``right`` with our default SGBM and
     ``ndisp`` disparities. The folder's object masks score every variant.
+
+    ``labels``: a polygon label file under ``conf/labels/`` (:func:`somtorch.disparity.labels.
+    read_polygon_labels`) that gives the scene its objects where the data folder has no mask.
 
     ``junk``: a synthetic failure class added to the map (see :func:`add_junk`): ``"border"`` (a
     band of speckles along the top and left borders at the main object's disparity, as SGBM leaves
@@ -35,6 +39,7 @@ class SceneSpec:
     right: Optional[str] = None
     ndisp: int = 128
     junk: Optional[str] = None
+    labels: Optional[str] = None
 
     @property
     def computed(self) -> bool:
@@ -62,8 +67,16 @@ def dev_scenes(names: list[str] | None = None, scene_list: str = "dev") -> list[
 
 
 def load_dev_scene(spec: SceneSpec, data_dir: str | Path) -> Any:
-    """The :class:`~somtorch.disparity.scene.Scene` of ``spec`` with the folder's object masks."""
+    """The :class:`~somtorch.disparity.scene.Scene` of ``spec`` with the folder's object masks (or
+    those of ``spec.labels``)."""
     scene = _load(spec, Path(data_dir))
+    if spec.labels:
+        import dataclasses
+
+        from somtorch.disparity.labels import read_polygon_labels
+
+        objects, info = read_polygon_labels(LABELS / spec.labels, tuple(scene.disparity.shape))
+        scene = dataclasses.replace(scene, objects=objects, object_info=info)
     return add_junk(scene, spec.junk, seed=sum(map(ord, spec.name))) if spec.junk else scene
 
 

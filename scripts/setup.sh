@@ -47,5 +47,10 @@ if [ "$(cat "$STAMP" 2>/dev/null)" = "$WANT" ] && $VPY -c 'import somtorch' 2>/d
 fi
 echo "[setup] installing somtorch[$EXTRA]"
 $VPY -m pip install -q -e ".[$EXTRA]" 2>&1 | grep -v -E "^WARNING: Location|is ignored|^ " || true  # drop setuptools banners
+if [ "$EXTRA" = "test" ]; then
+  # the test oracle of somtorch.saliency_metrics; --no-deps: its metadata pins numpy < 2.3.5 and
+  # scikit-image < 0.26, which it does not need (tests/test_saliency_metrics.py checks it works)
+  $VPY -m pip install -q --no-deps "pysodmetrics==1.6.2" || echo "[setup] WARNING: pysodmetrics not installed; its oracle test will skip" >&2
+fi
 $VPY -c 'import somtorch, torch; print(f"[setup] ok: somtorch {somtorch.__version__}, torch {torch.__version__}")'
 echo "$WANT" > "$STAMP"

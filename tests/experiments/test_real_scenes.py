@@ -69,3 +69,23 @@ def test_unknown_scene_or_list_fails_before_work(tmp_path):
         assert proc.returncode != 0
         assert ("no_such_scene" if "scenes" in bad else "nope") in proc.stderr
         assert not (tmp_path / "metrics.json").exists() and not (tmp_path / "results.md").exists()
+
+
+def test_baselines_run_through_the_same_scoring(shared_data, tmp_path):
+    proc = _run(tmp_path, "ensemble=2", "train.epochs=3", "scenes=[oakd_toy,flyingthings3d]",
+                "methods=[som,uv_disparity,dsw]", f"paths.data_dir={shared_data}")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    rows = json.loads((tmp_path / "metrics.json").read_text())["rows"]
+    # FlyingThings3D has no metric camera: DSW is skipped there, not scored as a miss
+    assert [(r["scene"], r["method"]) for r in rows] == [
+        ("oakd_toy", "som"), ("oakd_toy", "uv_disparity"), ("oakd_toy", "dsw"),
+        ("flyingthings3d", "som"), ("flyingthings3d", "uv_disparity")]
+    for r in rows:
+        assert r["runs"] == (2 if r["method"] == "som" else 1)
+        assert 0 <= r["useful_hits"] <= r["identified_95"] <= r["runs"]
+        s = r["saliency"]
+        assert 0 <= s["f_measure"] <= 1 and 0 <= s["mae"] <= 1 and 0 <= s["s_measure"] <= 1
+    md = (tmp_path / "results.md").read_text()
+    assert "| oakd_toy | uv_disparity |" in md and "S-measure" in md
+    bad = _run(tmp_path / "bad", "methods=[som,hough]", "scenes=[oakd_toy]", f"paths.data_dir={shared_data}")
+    assert bad.returncode != 0 and "hough" in (bad.stderr + bad.stdout)
