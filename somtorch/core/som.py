@@ -100,6 +100,9 @@ class SOM(nn.Module):
         self.register_buffer("adjacency", adjacency(d2, topology), persistent=False)
         self._fresh = (weakref.ref(self.weight), self.weight._version)  # the untouched zero weights
         self.initialized = False
+        self._plan: tuple[int, int] | None = None  # (epochs done, planned) while partial_fit runs
+        self._progress: tuple[int, int] = (0, 0)  # of the current partial_fit schedule
+        self._order_state: tuple | None = None  # the random order's current epoch, across partial_fit calls
 
     # ------------------------------------------------------------------ basics
     @property
@@ -285,6 +288,16 @@ class SOM(nn.Module):
         else:
             steps = max(1, epochs * n // batch_size)
             stream = steps * batch_size
+        offset, total = 0, None
+        if self._plan is not None:  # partial_fit: these epochs continue a longer schedule
+            done, planned = self._plan
+            per = {"online": n, "batch": 1}.get(mode)
+            if per is None:  # minibatch: the steps of the first k epochs, as fit counts them
+                offset, total = done * n // batch_size, max(1, planned * n // batch_size)
+                steps = max(1, (done + epochs) * n // batch_size - offset)
+            else:
+                offset, total, steps = done * per, planned * per, epochs * per
+            stream = steps * (batch_size if mode == "minibatch" else 1) if mode != "batch" else 0
         if isinstance(order, torch.Tensor):
             if mode == "batch":
                 raise ValueError("an explicit order has no meaning in mode='batch' (every step uses all samples)")
@@ -308,12 +321,60 @@ class SOM(nn.Module):
         if callback is not None and not callable(callback):
             raise TypeError(f"callback must be callable; got {type(callback).__name__}")
         # ---- all checks done: work starts here
+        if self._plan is None:
+            self._progress = (0, 0)  # a plain fit is a schedule of its own
         if not self.initialized:
             self.initialize(x, init)
+        cached = self._order_state if self._plan is not None else None
+        if cached is not None and cached[0] == (stream_order.kind, n):  # a mini-batch epoch split across calls
+            stream_order._epoch, stream_order._perm = cached[1], cached[2]
         run(self.weight.data, x, mode=mode, steps=steps, batch_size=batch_size, order=stream_order,
             sched=sched, grid_d2=self.grid_d2, neighborhood=nb, progress=progress, callback=callback,
-            callback_every=callback_every, desc=f"SOM {mode}")
+            callback_every=callback_every, desc=f"SOM {mode}", offset=offset, total=total)
+        self._order_state = ((stream_order.kind, n), stream_order._epoch, stream_order._perm) \
+            if self._plan is not None else None
         return self
+
+    def partial_fit(self, x: torch.Tensor, *, total_epochs: int, epochs: int = 1, **kwargs: Any) -> SOM:
+        """Train ``epochs`` more epochs on ``x`` as part of one schedule of ``total_epochs``.
+
+        The decay of the learning rate and the radius continues where the previous call stopped
+        instead of restarting (MiniSom users ask for this, minisom#83): ``k`` calls of
+        ``partial_fit(x, total_epochs=k)`` give the weights of ``fit(x, epochs=k)`` bitwise for
+        the same ``x``. ``x`` may change between calls (a stream of chunks: progress is counted
+        in epochs of the data at hand). The other keyword arguments are those of :meth:`fit` and
+        must stay the same within one schedule; :attr:`epochs_done` says how far it got. A call
+        of :meth:`fit`, or a different ``total_epochs`` after the schedule ended, starts a new one.
+        Random orders draw from the members' generators, so they continue as well.
+
+        Raises:
+            ValueError: ``epochs`` would run past ``total_epochs``, or ``total_epochs`` changed
+                in the middle of a schedule.
+        """
+        total_epochs = check_positive_int("total_epochs", total_epochs)
+        epochs = check_positive_int("epochs", epochs)
+        if "iterations" in kwargs:
+            raise ValueError("partial_fit counts epochs; iterations is for fit(mode='online')")
+        done, planned = self._progress
+        if planned != total_epochs or done >= planned:
+            if 0 < done < planned:
+                raise ValueError(f"a schedule of {planned} epochs is at epoch {done}; total_epochs={total_epochs} "
+                                 "would change it (call fit to start over)")
+            done, planned = 0, total_epochs
+        if done + epochs > planned:
+            raise ValueError(f"epoch {done} + {epochs} would run past total_epochs={planned}")
+        self._plan = (done, planned)
+        try:
+            self.fit(x, epochs=epochs, **kwargs)
+        finally:
+            self._plan = None
+        self._progress = (done + epochs, planned)
+        return self
+
+    @property
+    def epochs_done(self) -> int:
+        """Epochs of the current :meth:`partial_fit` schedule trained so far (0 after :meth:`fit`)."""
+        return self._progress[0]
 
     # ------------------------------------------------------------------ inference and metrics
     def bmu(self, x: torch.Tensor, *, chunk_elements: int = DEFAULT_CHUNK_ELEMENTS) -> torch.Tensor:

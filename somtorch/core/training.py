@@ -249,11 +249,19 @@ def _blocks(total: int, size: int, every: int | None) -> Iterator[tuple[int, int
 def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_size: int,
         order: Order, sched: Schedules, grid_d2: torch.Tensor, neighborhood: NeighborhoodFn,
         progress: bool = True, callback: Callback | None = None, callback_every: int | None = None,
-        desc: str = "SOM") -> None:
-    """Train ``weight`` in place for ``steps`` steps of the given mode (see the module docstring)."""
+        desc: str = "SOM", offset: int = 0, total: int | None = None) -> None:
+    """Train ``weight`` in place for ``steps`` steps of the given mode (see the module docstring).
+
+    ``offset`` / ``total``: the steps are steps ``offset … offset + steps − 1`` of a schedule of
+    ``total`` steps (default: the schedule is these ``steps``), so that training in parts
+    continues the decay instead of restarting it (:meth:`SOM.partial_fit`).
+    """
     from tqdm.auto import tqdm
 
     n = x.shape[-2]
+    planned = steps if total is None else total
+    if offset < 0 or offset + steps > planned:
+        raise ValueError(f"steps {offset}..{offset + steps} lie outside the schedule of {planned} steps")
     per_step = {"online": 1, "batch": n, "minibatch": batch_size}[mode]
     every = callback_every
     block = BLOCK_STEPS if mode == "online" else 1
@@ -262,14 +270,14 @@ def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_s
     try:
         with torch.no_grad():
             for start, stop in _blocks(steps, block, cut_every if callback is not None else None):
-                lr, sigma = sched.values(start, stop, steps)  # (S, E)
+                lr, sigma = sched.values(offset + start, offset + stop, planned)  # (S, E)
                 if mode == "online":
-                    xs = _take(x, order.indices(start, stop))
+                    xs = _take(x, order.indices(offset + start, offset + stop))
                     online_block(weight, xs, lr, sigma, grid_d2, neighborhood)
                 elif mode == "batch":
                     batch_step(weight, x, None, sigma[0], grid_d2, neighborhood)
                 else:
-                    xs = _take(x, order.indices(start * batch_size, stop * batch_size))
+                    xs = _take(x, order.indices((offset + start) * batch_size, (offset + stop) * batch_size))
                     if xs.shape[0] == 1 and x.ndim == 2:
                         xs = xs[0]  # one order shared by all members: shared samples (B, D)
                     batch_step(weight, xs, lr[0], sigma[0], grid_d2, neighborhood)

@@ -124,3 +124,39 @@ def test_blocks_cover_all_steps_and_cut_at_callback_multiples():
     stops = {b for _, b in blocks}
     assert {4, 8, 12, 16, 20, 10, 20, 23} <= stops
     assert all(b - a <= 10 for a, b in blocks)
+
+
+# ----------------------------------------------------------------------------- partial_fit
+@pytest.mark.parametrize("mode, order", [("batch", "sequential"), ("online", "sequential"), ("online", "random"),
+                                         ("minibatch", "random")])
+def test_partial_fit_continues_the_schedule_bitwise(mode, order):
+    from somtorch.core.som import SOM
+
+    x = torch.rand(300, 3, generator=torch.Generator().manual_seed(0))
+    whole = SOM(3, 4, 3, seed=5, ensemble=2).fit(x, mode=mode, epochs=4, order=order, progress=False)
+    parts = SOM(3, 4, 3, seed=5, ensemble=2)
+    for epochs in (1, 2, 1):
+        parts.partial_fit(x, total_epochs=4, epochs=epochs, mode=mode, order=order, progress=False)
+    assert parts.epochs_done == 4
+    assert torch.equal(whole.weight, parts.weight)
+    restart = SOM(3, 4, 3, seed=5, ensemble=2)
+    for _ in range(4):  # four fresh schedules of one epoch each: what partial_fit is for avoiding
+        restart.fit(x, mode=mode, epochs=1, order=order, progress=False)
+    assert not torch.equal(whole.weight, restart.weight)
+
+
+def test_partial_fit_guards_its_schedule():
+    from somtorch.core.som import SOM
+
+    x = torch.rand(100, 3, generator=torch.Generator().manual_seed(1))
+    som = SOM(3, 3, 3, seed=0)
+    som.partial_fit(x, total_epochs=3, progress=False)
+    with pytest.raises(ValueError, match="run past"):
+        som.partial_fit(x, total_epochs=3, epochs=3, progress=False)
+    with pytest.raises(ValueError, match="would change it"):
+        som.partial_fit(x, total_epochs=5, progress=False)
+    som.partial_fit(x, total_epochs=3, epochs=2, progress=False)
+    som.partial_fit(x, total_epochs=2, progress=False)  # the schedule ended: a new one starts
+    assert som.epochs_done == 1
+    som.fit(x, epochs=1, progress=False)
+    assert som.epochs_done == 0
