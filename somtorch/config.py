@@ -94,6 +94,10 @@ class TrainConfig(Validated):
         neighborhood: neighbourhood function (:data:`somtorch.core.neighborhood.NEIGHBORHOODS`).
         order: ``"random"`` or ``"sequential"`` sample order.
         batch_size: samples per step of the minibatch rule.
+        parallel: ``"none"``; ``"data"`` (data-parallel batch map on ``torch.distributed``: each rank
+            trains on its shard of the pixels, statistics all-reduced per epoch; batch mode only) or
+            ``"members"`` (ensemble members dealt to the ranks and gathered). Needs a process group
+            (``torchrun ... -m experiments.distributed``, ``docs/scaling.md``).
     """
 
     _group: ClassVar[str] = "train"
@@ -102,8 +106,12 @@ class TrainConfig(Validated):
         "sigma": Interval(0, None, open_lo=True, optional=True),
         "lr_decay": Choice("somtorch.core.decay:DECAYS"), "sigma_decay": Choice("somtorch.core.decay:DECAYS"),
         "neighborhood": Choice("somtorch.core.neighborhood:NEIGHBORHOODS"), "order": Choice(f"{_SOM}:ORDERS"),
-        "batch_size": POSITIVE_INT,
+        "batch_size": POSITIVE_INT, "parallel": OneOf(("none", "data", "members")),
     }
+    _relations: ClassVar[list[tuple[Any, str]]] = [
+        (lambda c: c.parallel != "data" or c.mode == "batch",
+         "parallel='data' trains the batch map; got mode={c.mode!r} (use parallel='members' for it)"),
+    ]
 
     mode: str = "batch"
     epochs: int = 10
@@ -114,6 +122,7 @@ class TrainConfig(Validated):
     neighborhood: str = "gaussian"
     order: str = "random"
     batch_size: int = 256
+    parallel: str = "none"
 
 
 @dataclass

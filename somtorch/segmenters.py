@@ -102,10 +102,36 @@ def _som(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg
             log_training("train/quantization_error", float(som.quantization_error(train.x).mean()), step)
             log_training("train/topographic_error", float(som.topographic_error(train.x).mean()), step)
             log_training("train/sigma", float(info.sigma.mean()), step)
-    som.fit(train.x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
-            sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, order=tc.order,
-            batch_size=tc.batch_size, init=cfg.som.init, progress=progress, callback=callback)
+    if tc.parallel != "none":
+        som = _fit_parallel(som, train, cfg)
+    else:
+        som.fit(train.x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
+                sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, order=tc.order,
+                batch_size=tc.batch_size, init=cfg.som.init, progress=progress, callback=callback)
     return _from_prototypes(som.weight.detach(), feats, som.grid_d2, som, som.seeds)
+
+
+def _fit_parallel(som: SOM, train: Features, cfg: PipelineConfig) -> SOM:
+    """``train.parallel``: the same map trained across the ranks of the process group."""
+    from somtorch.core.distributed import fit_data_parallel, fit_members_parallel, shard_range
+
+    import torch.distributed as dist
+
+    tc = cfg.train
+    if not (dist.is_available() and dist.is_initialized()):
+        raise ValueError(f"train.parallel={tc.parallel!r} needs a torch.distributed process group: launch with "
+                         "torchrun ... -m experiments.distributed (docs/scaling.md)")
+    if tc.parallel == "data":
+        som.initialize(train.x, cfg.som.init)  # every rank holds all features: start as one process would
+        start, stop = shard_range(len(train), dist.get_rank(), dist.get_world_size())
+        return fit_data_parallel(som, train.x[start:stop], epochs=tc.epochs, init=cfg.som.init, sigma=tc.sigma,
+                                 sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood)
+    return fit_members_parallel(
+        cfg.som.rows, cfg.som.cols, train.x, ensemble=som.ensemble, seed=som.seeds[0],
+        fit_kwargs={"mode": tc.mode, "epochs": tc.epochs, "lr": tc.lr, "sigma": tc.sigma, "lr_decay": tc.lr_decay,
+                    "sigma_decay": tc.sigma_decay, "neighborhood": tc.neighborhood, "order": tc.order,
+                    "batch_size": tc.batch_size, "init": cfg.som.init},
+        som_kwargs={"topology": cfg.som.topology, "toroidal": cfg.som.toroidal})
 
 
 @register("minisom", has_grid=True)
