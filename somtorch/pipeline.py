@@ -113,12 +113,12 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
            timer: _Timer | None = None) -> list[MemberResult]:
     """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d)."""
     timer = timer or _Timer()
+    with timer("objects"):  # every member segments the same pixels: one context for all
+        ctx = MapContext.build(scene.disparity, scene.valid, seg.labels[0] >= 0, ground, cfg.objects)
     obj_mask, x_opt = None, None
     if scene.objects is not None:
         obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
-        x_opt = optimal_reduction(obj_mask, scene.valid)  # the same for every member
-    with timer("objects"):  # every member segments the same pixels: one context for all
-        ctx = MapContext.build(scene.disparity, scene.valid, seg.labels[0] >= 0, ground, cfg.objects)
+        x_opt = optimal_reduction(obj_mask, scene.valid, ctx.integral)  # the same for every member
     r = cfg.reduction
     members = []
     for e in range(seg.labels.shape[0]):

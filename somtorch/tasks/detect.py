@@ -21,7 +21,8 @@ import torch
 
 from ..config import AreaConfig
 from .ground import GroundPlane
-from .objects import NeuronStats, ObjectArea, disparity_spread, find_object_areas, neuron_stats, select_areas
+from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
+                      select_areas)
 from .reduction import valid_integral
 from .refine import _opened_share, _square, box_purity, grow_area, map_solidity, merge_adjacent, refine_box
 
@@ -147,7 +148,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                               stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
                               clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)
-        own = torch.isin(lab_s, torch.tensor(done.neurons, dtype=labels.dtype))
+        own = label_mask(lab_s, done.neurons)
         done = replace(done, purity=box_purity(done, labels, ctx.integral),
                        solidity=_opened_share(own, square) / ctx.solidity, confidence=confidence)
         if first is None:

@@ -94,7 +94,17 @@ class ObjectArea:
 
     def mask(self, labels: torch.Tensor) -> torch.Tensor:
         """The area's pixels: the union of its neurons' segments. ``labels`` ``(H, W)`` → ``(H, W)`` bool."""
-        return torch.isin(labels, torch.tensor(self.neurons, dtype=labels.dtype, device=labels.device))
+        return label_mask(labels, self.neurons)
+
+
+def label_mask(labels: torch.Tensor, neurons: list[int] | torch.Tensor) -> torch.Tensor:
+    """``labels ∈ neurons`` as a bool mask of ``labels``' shape (−1 = no segment is never in):
+    a lookup table indexed by the labels, the same mask as ``torch.isin`` in about half the time."""
+    idx = torch.as_tensor(neurons, dtype=torch.long, device=labels.device)
+    top = int(idx.max()) if idx.numel() else 0
+    lut = torch.zeros(top + 3, dtype=torch.bool, device=labels.device)  # [-1, 0 … top, above top]
+    lut[idx + 1] = True
+    return lut[(labels + 1).clamp_(max=top + 2)] if idx.numel() else torch.zeros_like(labels, dtype=torch.bool)
 
 
 def disparity_spread(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[tuple[float, float], tuple[float, float]]:

@@ -69,9 +69,13 @@ def expand_box(box: Box, shape: tuple[int, int], *, tolerance_px: float = 0.0,
 
 
 def valid_integral(valid: torch.Tensor) -> torch.Tensor:
-    """Integral image of a bool mask ``(H, W)`` → ``(H+1, W+1)`` long: the count inside any box in O(1)."""
-    ii = torch.zeros(valid.shape[0] + 1, valid.shape[1] + 1, dtype=torch.long, device=valid.device)
-    ii[1:, 1:] = valid.long().cumsum(0).cumsum(1)
+    """Integral image of a bool mask ``(H, W)`` → ``(H+1, W+1)``: the count inside any box in O(1).
+
+    int32 while the map has fewer than 2³¹ pixels (half the memory traffic of int64), int64 above.
+    """
+    dt = torch.int32 if valid.numel() < 2 ** 31 else torch.long
+    ii = torch.zeros(valid.shape[0] + 1, valid.shape[1] + 1, dtype=dt, device=valid.device)
+    ii[1:, 1:] = valid.to(dt).cumsum(0, dtype=dt).cumsum(1, dtype=dt)
     return ii
 
 

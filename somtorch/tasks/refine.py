@@ -20,7 +20,7 @@ from dataclasses import replace
 import torch
 
 from ..config import AreaConfig
-from .objects import NeuronStats, ObjectArea
+from .objects import NeuronStats, ObjectArea, label_mask
 
 _D = AreaConfig  # the defaults of the helpers below are those of the config
 
@@ -195,7 +195,7 @@ def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Ten
     ii = valid_integral
     n_valid = int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0])
     crop = labels[y0:y1 + 1, x0:x1 + 1]
-    own = int(torch.isin(crop, torch.tensor(area.neurons, dtype=labels.dtype)).sum())
+    own = int(label_mask(crop, area.neurons).sum())
     return own / max(n_valid, 1)
 
 

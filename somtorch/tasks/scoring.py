@@ -39,10 +39,11 @@ def object_box(mask: torch.Tensor) -> tuple[int, int, int, int]:
     return int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())
 
 
-def optimal_reduction(object_mask: torch.Tensor, valid: torch.Tensor) -> float:
-    """x_opt: the reduction in % when exactly the object's bounding box is kept."""
+def optimal_reduction(object_mask: torch.Tensor, valid: torch.Tensor, integral: torch.Tensor | None = None) -> float:
+    """x_opt: the reduction in % when exactly the object's bounding box is kept (``integral``: the
+    valid mask's integral image if the caller has it)."""
     return reduce_map([object_box(object_mask)], valid, tolerance_px=0.0, tolerance_frac=0.0,
-                      tolerance_image=0.0).reduction_union
+                      tolerance_image=0.0, integral=integral).reduction_union
 
 
 def score_reduction(reduction: Reduction, object_mask: torch.Tensor, valid: torch.Tensor,

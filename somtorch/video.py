@@ -1,0 +1,164 @@
+"""Disparity video: the pipeline frame by frame, each SOM warm-started from the previous frame's.
+
+A scene changes little from one frame to the next, so :class:`SequenceRunner` keeps what it can:
+
+* **the SOM**: frame 1 trains cold (the configured schedule); every later frame starts from the
+  previous weights and trains ``warm_epochs`` batch-map epochs with a small radius
+  (``warm_sigma`` → the schedule's final radius), which adapts the map instead of re-ordering it;
+* **the ground plane**: re-used while it still explains the new frame (its inlier share stays ≥
+  ``ground_keep`` × the share it had when fitted), refitted otherwise and every
+  ``ground_every`` frames;
+* **buffers**: the camera and the config are the sequence's; the SOM's grid and generators live
+  across frames.
+
+:func:`iter_sequence` is the library iterator; ``python -m experiments.video`` the Hydra
+experiment (a synthetic camera motion over a real scene when no sequence is given), and
+``benchmarks/bench_video.py`` measures frames per second, warm against cold.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+
+import torch
+
+from .config import PipelineConfig
+from .core import SOM
+from .disparity.features import make_features
+from .disparity.scene import Scene
+from .pipeline import MemberResult, detect
+from .segmenters import Segmentation, _from_prototypes
+from .tasks.ground import GroundPlane, fit_ground_plane
+from .tasks.segmentation import segment
+
+__all__ = ["FrameResult", "SequenceRunner", "iter_sequence"]
+
+
+@dataclass
+class FrameResult:
+    """One frame: its members' results, whether it was warm-started, whether the ground plane was
+    re-used, and the seconds per stage."""
+
+    index: int
+    members: list[MemberResult]
+    warm: bool
+    ground_reused: bool
+    ground: GroundPlane | None
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def seconds(self) -> float:
+        return sum(self.timings.values())
+
+
+class SequenceRunner:
+    """Steps 1a–1d on a stream of frames (see the module docstring).
+
+    Args:
+        cfg: the pipeline config (``method`` must be ``"som"``; the batch map is used for the
+            warm frames whatever ``train.mode`` the cold frame uses).
+        warm: False = every frame cold (the reference the warm frames are compared with).
+        warm_epochs: batch-map epochs of a warm frame.
+        warm_sigma: initial radius of a warm frame (grid units).
+        ground_keep: re-use the plane while its inlier share is ≥ this × its share when fitted.
+        ground_every: refit the plane at least every this many frames.
+        reuse_ground: re-use the plane across frames (default: as ``warm``).
+    """
+
+    def __init__(self, cfg: PipelineConfig | None = None, *, warm: bool = True, warm_epochs: int = 2,
+                 warm_sigma: float = 2.0, ground_keep: float = 0.9, ground_every: int = 15,
+                 reuse_ground: bool | None = None) -> None:
+        self.cfg = cfg or PipelineConfig()
+        if self.cfg.method != "som":
+            raise ValueError(f"a warm-started sequence needs method='som'; got {self.cfg.method!r}")
+        if warm_epochs < 1 or ground_every < 1:
+            raise ValueError("warm_epochs and ground_every must be >= 1")
+        if not 0 < ground_keep <= 1 or not warm_sigma > 0:
+            raise ValueError("ground_keep must be in (0, 1] and warm_sigma > 0")
+        self.warm, self.warm_epochs, self.warm_sigma = warm, warm_epochs, warm_sigma
+        self.ground_keep, self.ground_every = ground_keep, ground_every
+        self.reuse_ground = warm if reuse_ground is None else reuse_ground
+        self.som: SOM | None = None
+        self._ground: GroundPlane | None = None
+        self._ground_age = 0
+        self._index = 0
+
+    def _ground_for(self, scene: Scene, valid: torch.Tensor) -> tuple[GroundPlane | None, bool]:
+        g, cfg = self._ground, self.cfg.ground
+        if self.reuse_ground and g is not None and self._ground_age < self.ground_every:
+            h, w = scene.disparity.shape
+            mask = valid & ((scene.disparity - g.disparity(h, w)).abs() <= g.tol)
+            share = float(mask.sum()) / max(int(valid.sum()), 1)
+            if share >= self.ground_keep * g.inlier_frac:
+                self._ground_age += 1
+                return GroundPlane(g.a, g.b, g.c, g.tol, mask, share), True
+        g = fit_ground_plane(scene.disparity, valid, cfg)
+        self._ground, self._ground_age = g, 0
+        return g, False
+
+    def step(self, scene: Scene) -> FrameResult:
+        """Run one frame."""
+        cfg, t = self.cfg, {}
+        t0 = time.perf_counter()
+        valid = scene.valid
+        if cfg.features.speckle_frac > 0:
+            from .disparity.filters import remove_speckles
+
+            valid = remove_speckles(scene.disparity, valid, max_size_frac=cfg.features.speckle_frac)
+        ground, reused = self._ground_for(scene, valid)
+        t["ground"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        usable = valid if ground is None else valid & ~ground.mask
+        f = cfg.features
+        feats = make_features(scene.disparity, usable, normalize=f.normalize, d_weight=f.d_weight,
+                              image=scene.image if f.color_weight > 0 else None, color_weight=f.color_weight)
+        train = feats.subsample(f.train_stride)
+        t["features"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        tc = cfg.train
+        warm = self.warm and self.som is not None and self.som.dim == train.x.shape[-1]
+        if warm:
+            self.som.fit(train.x, mode="batch", epochs=self.warm_epochs, sigma=self.warm_sigma,
+                         sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, progress=False)
+        else:
+            self.som = SOM.from_config(cfg.som, train.x.shape[-1], ensemble=cfg.runs, seed=cfg.seed)
+            self.som.fit(train.x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
+                         sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, order=tc.order,
+                         batch_size=tc.batch_size, init=cfg.som.init, progress=False)
+        t["train"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        w = self.som.weight.detach()
+        seg: Segmentation = _from_prototypes(w, feats, self.som.grid_d2, self.som, self.som.seeds)
+        seg.labels = segment(w, feats.x, feats.pixels, feats.shape)
+        t["segment"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        members = detect(scene, seg, ground, cfg)
+        t["objects"] = time.perf_counter() - t0
+        out = FrameResult(self._index, members, warm, reused, ground, t)
+        self._index += 1
+        return out
+
+
+def iter_sequence(frames: Iterable[Scene], cfg: PipelineConfig | None = None, **kwargs) -> Iterator[FrameResult]:
+    """:class:`SequenceRunner` over ``frames``, one :class:`FrameResult` per frame (lazily: a
+    frame is read from ``frames`` only when the previous one is done)."""
+    runner = SequenceRunner(cfg, **kwargs)
+    for scene in frames:
+        yield runner.step(scene)
+
+
+def pan_sequence(scene: Scene, width: int, height: int, frames: int, step_px: int = 4) -> Iterator[Scene]:
+    """A synthetic camera motion over a real scene: ``frames`` windows of ``width × height`` sliding
+    ``step_px`` to the right per frame, back and forth across the map (objects move along)."""
+    from .tiles import crop_scene
+
+    if width > scene.width or height > scene.height:
+        raise ValueError(f"a {width} x {height} window does not fit the {scene.width} x {scene.height} scene")
+    span = scene.width - width
+    y0 = (scene.height - height) // 2
+    for i in range(frames):
+        pos = (i * step_px) % (2 * span) if span else 0
+        x0 = pos if pos <= span else 2 * span - pos
+        yield crop_scene(scene, y0, y0 + height, x0, x0 + width)

@@ -1,0 +1,59 @@
+"""The sequence runner: warm-started frames, re-used ground, the same results as run_pipeline cold."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from somtorch.config import PipelineConfig, with_overrides
+from somtorch.disparity.scene import scene_from_arrays
+from somtorch.pipeline import run_pipeline
+from somtorch.video import SequenceRunner, iter_sequence, pan_sequence
+
+
+def _world(h=90, w=200):
+    """A floor rising towards the camera, a wall behind, one box standing on the floor."""
+    rows = torch.arange(h, dtype=torch.float32)[:, None].expand(h, w)
+    d = torch.where(rows > 30, 5.0 + (rows - 30) * 0.5, torch.full_like(rows, 5.0)).clone()
+    d += 0.05 * torch.rand(h, w, generator=torch.Generator().manual_seed(0))
+    obj = torch.zeros(h, w, dtype=torch.int64)
+    obj[35:70, 80:120] = 1
+    d[obj == 1] = 40.0
+    return scene_from_arrays(d, objects=obj, name="world")
+
+
+def test_pan_moves_the_window_and_its_objects():
+    frames = list(pan_sequence(_world(), 120, 90, 5, step_px=10))
+    assert len(frames) == 5 and all(f.disparity.shape == (90, 120) for f in frames)
+    xs = [int(f.objects.nonzero()[:, 1].min()) for f in frames]
+    assert xs == [80, 70, 60, 50, 40]  # the window slides right: the object moves left
+    with pytest.raises(ValueError, match="does not fit"):
+        next(pan_sequence(_world(), 300, 90, 1))
+
+
+def test_warm_frames_keep_the_object_and_reuse_the_ground():
+    cfg = with_overrides(PipelineConfig(), {"ensemble": 1})
+    res = list(iter_sequence(pan_sequence(_world(), 120, 90, 8, step_px=3), cfg))
+    assert [r.warm for r in res] == [False] + [True] * 7
+    assert all(r.members[0].score.useful_hit for r in res)
+    assert res[0].ground is not None and sum(r.ground_reused for r in res) >= 5
+    assert set(res[1].timings) == {"ground", "features", "train", "segment", "objects"}
+
+
+def test_a_cold_frame_is_what_run_pipeline_gives():
+    cfg = with_overrides(PipelineConfig(), {"ensemble": 2})
+    frame = next(pan_sequence(_world(), 120, 90, 1))
+    cold = SequenceRunner(cfg, warm=False).step(frame)
+    ref = run_pipeline(frame, cfg, metrics=False)
+    for got, want in zip(cold.members, ref.members):
+        assert [a.box for a in got.kept] == [a.box for a in want.kept]
+        assert got.reduction.reduction_union == want.reduction.reduction_union
+
+
+def test_runner_checks_its_settings():
+    with pytest.raises(ValueError, match="method='som'"):
+        SequenceRunner(with_overrides(PipelineConfig(), {"method": "kmeans", "objects.link": "image"}))
+    with pytest.raises(ValueError):
+        SequenceRunner(warm_epochs=0)
+    with pytest.raises(ValueError):
+        SequenceRunner(ground_keep=1.5)
