@@ -29,6 +29,7 @@ from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
 from experiments.schema import RunConfig, register
+from somtorch.config import WarmStartConfig
 
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 SCHEMA = "somtorch.video/1"
@@ -36,19 +37,15 @@ log = logging.getLogger("somtorch.video")
 
 
 @dataclass
-class SequenceConfig:
-    """Which frames (``glob`` of disparity files, or a pan over ``data``) and the warm start."""
+class SequenceConfig(WarmStartConfig):
+    """Which frames (``glob`` of disparity files, or a pan over ``data``) plus the warm start of
+    :class:`somtorch.config.WarmStartConfig`."""
 
     glob: Optional[str] = None
     frames: int = 60
     width: int = 1264
     height: int = 720
     step_px: int = 4
-    warm: bool = True
-    warm_epochs: int = 2
-    warm_sigma: float = 2.0
-    ground_keep: float = 0.9
-    ground_every: int = 15
 
 
 @dataclass

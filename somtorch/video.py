@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .config import PipelineConfig
+from .config import PipelineConfig, WarmStartConfig
 from .core import SOM
 from .disparity.features import make_features
 from .disparity.scene import Scene
@@ -33,7 +33,9 @@ from .segmenters import Segmentation, _from_prototypes
 from .tasks.ground import GroundPlane, fit_ground_plane
 from .tasks.segmentation import segment
 
-__all__ = ["FrameResult", "SequenceRunner", "iter_sequence"]
+__all__ = ["FrameResult", "SequenceRunner", "iter_sequence", "pan_sequence"]
+
+_W = WarmStartConfig  # the defaults, declared once in somtorch.config
 
 
 @dataclass
@@ -67,16 +69,13 @@ class SequenceRunner:
         reuse_ground: re-use the plane across frames (default: as ``warm``).
     """
 
-    def __init__(self, cfg: PipelineConfig | None = None, *, warm: bool = True, warm_epochs: int = 2,
-                 warm_sigma: float = 2.0, ground_keep: float = 0.9, ground_every: int = 15,
-                 reuse_ground: bool | None = None) -> None:
+    def __init__(self, cfg: PipelineConfig | None = None, *, warm: bool = _W.warm, warm_epochs: int = _W.warm_epochs,
+                 warm_sigma: float = _W.warm_sigma, ground_keep: float = _W.ground_keep,
+                 ground_every: int = _W.ground_every, reuse_ground: bool | None = None) -> None:
         self.cfg = cfg or PipelineConfig()
         if self.cfg.method != "som":
             raise ValueError(f"a warm-started sequence needs method='som'; got {self.cfg.method!r}")
-        if warm_epochs < 1 or ground_every < 1:
-            raise ValueError("warm_epochs and ground_every must be >= 1")
-        if not 0 < ground_keep <= 1 or not warm_sigma > 0:
-            raise ValueError("ground_keep must be in (0, 1] and warm_sigma > 0")
+        WarmStartConfig(warm, warm_epochs, warm_sigma, ground_keep, ground_every)  # the checks, named
         self.warm, self.warm_epochs, self.warm_sigma = warm, warm_epochs, warm_sigma
         self.ground_keep, self.ground_every = ground_keep, ground_every
         self.reuse_ground = warm if reuse_ground is None else reuse_ground
