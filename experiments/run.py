@@ -158,5 +158,12 @@ def main(dcfg: DictConfig) -> dict:
             return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
 
 
+def cli() -> None:
+    """Console entry: the overrides are checked against the schema first ("did you mean")."""
+    from experiments.cli import run_checked
+
+    run_checked(main, RunConfig)
+
+
 if __name__ == "__main__":
-    main()
+    cli()

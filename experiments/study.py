@@ -244,5 +244,12 @@ def main(dcfg: DictConfig) -> float:
     return float(metrics["summary"].get("tradeoff", 0.0))
 
 
+def cli() -> None:
+    """Console entry: the overrides are checked against the schema first ("did you mean")."""
+    from experiments.cli import run_checked
+
+    run_checked(main, StudyConfig)
+
+
 if __name__ == "__main__":
-    main()
+    cli()

@@ -277,5 +277,12 @@ def main(dcfg: DictConfig) -> int:
 
 
 register()
+def cli() -> None:
+    """Console entry: the overrides are checked against the schema first ("did you mean")."""
+    from experiments.cli import run_checked
+
+    run_checked(main, ValidateConfig)
+
+
 if __name__ == "__main__":
-    main()
+    cli()

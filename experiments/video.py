@@ -114,5 +114,12 @@ def main(dcfg: DictConfig) -> dict:
     return summary
 
 
+def cli() -> None:
+    """Console entry: the overrides are checked against the schema first ("did you mean")."""
+    from experiments.cli import run_checked
+
+    run_checked(main, VideoConfig)
+
+
 if __name__ == "__main__":
-    main()
+    cli()

@@ -1,0 +1,84 @@
+"""Command-line overrides checked before Hydra sees them: an unknown key gets a "did you mean".
+
+Hydra answers ``objects.simlarity=0.1`` with "Key 'simlarity' not in 'AreaConfig'" and the advice
+to *append* it with ``+``, which would silently add a key nothing reads. :func:`check_overrides`
+looks every plain ``key=value`` override up in the experiment's schema (the dataclass tree of its
+config) and in the config groups of ``conf/``, and stops with one line naming the closest known
+key or option. Overrides with a ``+`` / ``++`` / ``~`` prefix, ``hydra.*`` and Hydra's own flags are
+left to Hydra.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import sys
+import typing
+from pathlib import Path
+from typing import Any
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+
+
+def schema_keys(schema: type, prefix: str = "") -> tuple[set[str], set[str]]:
+    """``(keys, open_keys)``: every dotted field path of a dataclass tree, and the paths of fields
+    that take free sub-keys (dicts, ``Any``)."""
+    keys, open_keys = set(), set()
+    hints = typing.get_type_hints(schema)
+    for f in dataclasses.fields(schema):
+        if f.name.startswith("_"):
+            continue
+        path = f"{prefix}{f.name}"
+        keys.add(path)
+        t = hints.get(f.name, Any)
+        if dataclasses.is_dataclass(t):
+            sub, sub_open = schema_keys(t, path + ".")
+            keys |= sub
+            open_keys |= sub_open
+        elif t is Any or typing.get_origin(t) is dict or t is dict:
+            open_keys.add(path)
+    return keys, open_keys
+
+
+def _groups() -> dict[str, list[str]]:
+    return {d.name: sorted(p.stem for p in d.glob("*.yaml")) for d in CONF.iterdir()
+            if d.is_dir() and any(d.glob("*.yaml"))}
+
+
+def _hint(word: str, known: list[str]) -> str:
+    near = difflib.get_close_matches(word, known, n=1, cutoff=0.6)
+    return f"did you mean {near[0]!r}?" if near else f"known: {', '.join(sorted(known)[:12])}" + (
+        ", ..." if len(known) > 12 else "")
+
+
+def check_overrides(argv: list[str], schema: type) -> str | None:
+    """The error line for the first unknown key or group option in ``argv``, or None."""
+    keys, open_keys = schema_keys(schema)
+    groups = _groups()
+    for arg in argv:
+        if arg.startswith("-") or "=" not in arg or arg[0] in "+~":
+            continue
+        key, value = arg.split("=", 1)
+        if key.startswith("hydra") or "@" in key or "/" in key:
+            continue
+        if key in groups and key not in keys - set(groups):
+            options = [v.strip() for v in value.split(",")]  # a sweep lists several
+            for opt in options:
+                if opt and opt not in groups[key] and not opt.startswith(("range(", "choice(", "glob(")):
+                    return f"{key}={opt}: no option {opt!r} in conf/{key}/; {_hint(opt, groups[key])}"
+            continue
+        if key in keys or any(key.startswith(o + ".") for o in open_keys):
+            continue
+        return (f"unknown config key {key!r}: {_hint(key, sorted(keys | set(groups)))} "
+                "(--cfg job prints every key)")
+    return None
+
+
+def run_checked(main: Any, schema: type, argv: list[str] | None = None) -> Any:
+    """Check ``sys.argv`` against ``schema``, then call the Hydra ``main``; a bad key exits with
+    status 2 and one line on stderr."""
+    err = check_overrides(list(sys.argv[1:] if argv is None else argv), schema)
+    if err is not None:
+        print(f"error: {err}", file=sys.stderr)
+        raise SystemExit(2)
+    return main()

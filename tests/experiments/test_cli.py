@@ -1,0 +1,68 @@
+"""Overrides are checked before Hydra: unknown keys and options get a "did you mean"."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from experiments.cli import check_overrides
+from experiments.real_scenes import ScenesConfig
+from experiments.schema import RunConfig
+from experiments.study import StudyConfig
+from experiments.validate import ValidateConfig
+from experiments.video import VideoConfig
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["objects.simlarity=0.1"], "did you mean 'objects.similarity'"),
+    (["train.epoch=3"], "did you mean 'train.epochs'"),
+    (["objects=robst"], "did you mean 'robust'"),
+    (["data=kitti"], "did you mean 'kitti2015'"),
+    (["som=grid8x9"], "did you mean 'grid8x8'"),
+    (["ensemble=2", "reduction.tolerance_imag=0.1"], "did you mean 'reduction.tolerance_image'"),
+])
+def test_typos_are_named_with_the_nearest_key(args, expect):
+    err = check_overrides(args, RunConfig)
+    assert err is not None and expect in err
+
+
+@pytest.mark.parametrize("args", [
+    ["ensemble=3", "objects.similarity=0.1", "objects=paper", "data=kitti2015", "+preset=paper",
+     "hydra.run.dir=/tmp/x", "~objects.grow", "++foo=1", "data.sgbm.numDisparities=64", "-m",
+     "objects.similarity=0.01,0.05", "hydra/launcher=joblib", "train=online,batch"],
+])
+def test_valid_overrides_pass(args):
+    assert check_overrides(args, RunConfig) is None
+
+
+@pytest.mark.parametrize("name, schema", [("run", RunConfig), ("study", StudyConfig), ("validate", ValidateConfig),
+                                          ("real_scenes", ScenesConfig), ("video", VideoConfig)])
+def test_every_composed_key_is_known(name, schema):
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(name)
+    flat = []
+
+    def walk(node, prefix=""):
+        for k, v in node.items():
+            if isinstance(v, dict) and v:
+                walk(v, f"{prefix}{k}.")
+            else:
+                flat.append(f"{prefix}{k}={v if not isinstance(v, (list, dict)) else 0}")
+
+    walk(OmegaConf.to_container(cfg, resolve=False))
+    assert check_overrides(flat, schema) is None
+
+
+def test_the_command_line_stops_in_one_line():
+    proc = subprocess.run([sys.executable, "-m", "experiments.run", "objects.simlarity=0.1"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        "error: unknown config key 'objects.simlarity': did you mean 'objects.similarity'? (--cfg job prints every key)"]
