@@ -58,7 +58,10 @@ def load_input(cfg: RunConfig):
         raise ValueError("data.source is empty: give 'motorcycle', a scene folder or a disparity file")
     spec = d.source if d.source == "motorcycle" else to_absolute_path(d.source)
     disp = to_absolute_path(d.disparity_file) if d.disparity_file else None
-    return load_scene(spec, disparity_file=disp)
+    scene = load_scene(spec, disparity_file=disp)
+    if d.name:  # one name in the log, metrics.json and the run folder (kitti2015, not devkit_demo)
+        scene.name = d.name
+    return scene
 
 
 def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> dict:
@@ -149,13 +152,20 @@ def main(dcfg: DictConfig) -> dict:
     from experiments.schema import one_line_errors
     from somtorch.atomic import exclusive_folder, exit_cleanly_on_sigterm
 
-    with one_line_errors(log):
-        cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
-        out_dir = Path(HydraConfig.get().runtime.output_dir)
-        exit_cleanly_on_sigterm()  # a killed run removes its staging folder
-        out_dir.mkdir(parents=True, exist_ok=True)
-        with exclusive_folder(out_dir):  # two runs never write into one folder
-            return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    try:
+        with one_line_errors(log):
+            cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
+            exit_cleanly_on_sigterm()  # a killed run removes its staging folder
+            out_dir.mkdir(parents=True, exist_ok=True)
+            with exclusive_folder(out_dir):  # two runs never write into one folder
+                return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
+    except SystemExit as e:
+        if e.code and out_dir.is_dir() and not (out_dir / "metrics.json").exists():
+            # the folder Hydra created holds only its config and the log: mark it, so that nobody
+            # (and no aggregate) takes it for a run
+            (out_dir / "FAILED").write_text(f"this run failed (exit status {e.code}); the error is in run.log\n")
+        raise
 
 
 def cli() -> None:

@@ -67,8 +67,14 @@ class RunConfig(PipelineConfig):
 
 def register() -> None:
     """Register the schemas in Hydra's ConfigStore (idempotent)."""
+    from pathlib import Path
+
+    from omegaconf import OmegaConf
+
     cs = ConfigStore.instance()
     cs.store(name="run_schema", node=RunConfig)
+    # ${stem:${data.source}}: a file input's run folder and scene are named after the file
+    OmegaConf.register_new_resolver("stem", lambda p: Path(str(p)).stem or "file", replace=True)
 
 
 @contextlib.contextmanager

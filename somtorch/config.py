@@ -228,6 +228,10 @@ class AreaConfig(Validated):
         max_areas: how many areas are kept at most.
         keep_ratio: with ``max_areas > 1``, a further area is kept only if its rank score is at
             least this share of the best one's (1 = only ties; 0 = up to ``max_areas``).
+        keep_budget: a further area is kept only if the union of the kept boxes then holds at most
+            this share of the valid pixels (the data-reduction budget: every salient area that
+            fits is kept, one that would make the reduction too small is skipped; the first area
+            is always kept). 1 = no budget.
         fail_safe: when no candidate passes the checks, keep the whole map (and flag
             ``no_object``) instead of the best-ranked candidate.
 
@@ -263,6 +267,7 @@ class AreaConfig(Validated):
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
         "select": Choice("somtorch.tasks.objects:SELECTIONS"), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
+        "keep_budget": Interval(0, 1, open_lo=True),
         "fail_safe": BOOL, "min_contrast": NON_NEGATIVE, "max_area_frac": Interval(0, 1, open_lo=True),
         "min_area_frac": FRACTION,
     }
@@ -292,6 +297,7 @@ class AreaConfig(Validated):
     select: str = "salient"
     max_areas: int = 2
     keep_ratio: float = 0.75
+    keep_budget: float = 1.0
     fail_safe: bool = True
     min_contrast: float = 0.0
     max_area_frac: float = 0.7

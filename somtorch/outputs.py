@@ -51,12 +51,15 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "reduction_union": m.reduction.reduction_union,
             "reduction_crops": m.reduction.reduction_crops,
             "no_object": m.no_object,
+            "kept_everything": m.reduction.reduction_union < 1.0,
             "score": m.score.as_dict() if m.score is not None else None,
         })
     out: dict[str, Any] = {
         "method": result.method,
         "scene": {"name": scene.name, "height": scene.height, "width": scene.width,
-                  "valid_pixels": scene.n_valid, "removed_pixels": result.features.n_invalid,
+                  "valid_pixels": scene.n_valid,
+                  "invalid_pixels": scene.height * scene.width - scene.n_valid,
+                  "ground_pixels": int(result.ground.mask.sum()) if result.ground is not None else 0,
                   "has_objects": scene.objects is not None, "source": scene.source},
         "pixels": {"train": len(result.train_features), "segmented": len(result.features),
                    "train_stride": result.train_features.stride},
@@ -133,12 +136,13 @@ def write_point_clouds(scene: Scene, result: PipelineResult, out_dir: Path, *, m
     full = disparity_to_point_cloud(scene.disparity, scene.valid, **kw)
     reduced = disparity_to_point_cloud(scene.disparity, scene.valid,
                                        mask=result.members[member].reduction.mask, **kw)
-    write_ply(full, out_dir / "cloud_full.ply")
+    units = f"x y z in {cam.baseline_unit} (the baseline's unit), camera frame of the left view"
+    write_ply(full, out_dir / "cloud_full.ply", comment=units)
     info: dict[str, Any] = {"written": True, "unit": cam.baseline_unit, "voxel_size": voxel_size,
                             "points_full": len(full), "points_reduced": len(reduced),
                             "bytes_full": full.nbytes, "bytes_reduced": reduced.nbytes}
     if len(reduced):
-        write_ply(reduced, out_dir / "cloud_reduced.ply")
+        write_ply(reduced, out_dir / "cloud_reduced.ply", comment=units)
         if render:
             info["render_backend"] = render_point_cloud(reduced, out_dir / "cloud_reduced.png",
                                                         backend=render_backend, view="oblique")

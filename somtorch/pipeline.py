@@ -89,10 +89,32 @@ class _Timer:
             self.t[stage] = self.t.get(stage, 0.0) + time.perf_counter() - t0
 
 
+def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
+    """The degenerate-input checks of :func:`prepare` (see there)."""
+    n = scene.n_valid
+    need = max(16, cfg.som.rows * cfg.som.cols if cfg.method in ("som", "minisom") else 16)
+    if n < need:
+        raise ValueError(f"scene {scene.name!r}: only {n} valid pixel(s); the segmentation needs at least {need} "
+                         f"(one per SOM neuron, {cfg.som.rows}x{cfg.som.cols}); is the right disparity file loaded?")
+    d = scene.disparity[scene.valid]
+    lo, hi = float(d.min()), float(d.max())
+    if hi - lo <= 1e-6 * max(1.0, abs(hi)):
+        raise ValueError(f"scene {scene.name!r}: every valid pixel has disparity {lo:g} px, a constant map with "
+                         "nothing to single out" + (" (an all-zero map: the file holds no disparity, or "
+                                                    "0 should mean 'invalid' and does not in this format)" if lo == 0 else ""))
+
+
 def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None
             ) -> tuple[torch.Tensor, GroundPlane | None, torch.Tensor, Features, Features]:
-    """Stages clean, ground and features: ``(valid, ground, usable, features, training features)``."""
+    """Stages clean, ground and features: ``(valid, ground, usable, features, training features)``.
+
+    Raises:
+        ValueError: before any work, for a map no segmentation can use: fewer valid pixels than
+            the SOM has neurons (or than 16), or one disparity everywhere (a constant map — an
+            all-zero file usually means its invalid value was not declared).
+    """
     timer = timer or _Timer()
+    check_usable(scene, cfg)
     with timer("clean"):
         valid = remove_speckles(scene.disparity, scene.valid, max_size_frac=cfg.features.speckle_frac)
     with timer("ground"):
@@ -132,6 +154,10 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
         score = score_reduction(red, obj_mask, scene.valid, x_opt=x_opt) if obj_mask is not None else None
         members.append(MemberResult(seg.seeds[e], found.areas, found.kept, red, score, found.stats,
                                     found.no_object))
+    everything = [i for i, m in enumerate(members) if not m.no_object and m.reduction.reduction_union < 1.0]
+    if everything:
+        log.warning("scene %s: member(s) %s keep %s of the valid pixels (reduction < 1 %%): the kept areas cover "
+                    "the whole map", scene.name, everything[:5], "all or nearly all")
     fallback = sum(m.no_object for m in members)
     if fallback:
         log.warning("scene %s: %d of %d member(s) found no convincing object area; the whole map is kept "

@@ -44,7 +44,8 @@ def _atomic_output(path: Path) -> Iterator[Path]:
         raise
 
 
-def write_ply(cloud: PointCloud, path: str | os.PathLike[str], *, binary: bool = True) -> Path:
+def write_ply(cloud: PointCloud, path: str | os.PathLike[str], *, binary: bool = True,
+              comment: str | None = None) -> Path:
     """Write a cloud to a PLY file with Open3D, atomically (a temporary file, then ``os.replace``).
 
     Columns: ``x y z`` as float32, ``red green blue`` as uchar (the PLY convention every viewer reads;
@@ -52,9 +53,13 @@ def write_ply(cloud: PointCloud, path: str | os.PathLike[str], *, binary: bool =
     (viewers ignore them; :func:`read_ply` restores them). Binary files keep float32 exactly; ASCII
     files hold what Open3D prints, 6 significant digits (relative error up to 5e-6).
 
+    ``comment``: a line written into the header as ``comment …`` (e.g. the units of x y z).
+
     Returns:
         The path written.
     """
+    if comment is not None and ("\n" in comment or "\r" in comment):
+        raise ValueError("a PLY comment must be one line")
     if not isinstance(cloud, PointCloud):
         raise TypeError(f"cloud must be a PointCloud; got {type(cloud).__name__}")
     if len(cloud) == 0:
@@ -75,7 +80,19 @@ def write_ply(cloud: PointCloud, path: str | os.PathLike[str], *, binary: bool =
     with _atomic_output(path) as tmp:
         if not o3d.t.io.write_point_cloud(str(tmp), t, write_ascii=not binary):
             raise OSError(f"Open3D could not write the PLY file {path} (see its warning above)")
+        if comment is not None:
+            _add_comment(Path(tmp), comment)
     return path
+
+
+def _add_comment(path: Path, comment: str) -> None:
+    """Insert ``comment …`` after the ``format`` line of a PLY header (the body is untouched)."""
+    data = path.read_bytes()
+    start = data.find(b"\nformat ")
+    end = data.find(b"\n", start + 1)
+    if start < 0 or end < 0:
+        raise OSError(f"{path}: no 'format' line in the PLY header Open3D wrote")
+    path.write_bytes(data[:end + 1] + b"comment " + comment.encode("ascii", "replace") + b"\n" + data[end + 1:])
 
 
 _PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2,

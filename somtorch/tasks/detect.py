@@ -23,7 +23,7 @@ from ..config import AreaConfig
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
                       select_areas)
-from .reduction import valid_integral
+from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, _square, box_purity, grow_area, map_solidity, merge_adjacent, refine_box
 
 __all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "rank_score"]
@@ -115,7 +115,9 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     (:func:`grow_area`), and kept if its :func:`box_purity` reaches ``cfg.min_purity`` and its
     segments' solidity reaches ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a
     dense map's standard). After the first kept area, a further one must score at least
-    ``cfg.keep_ratio ×`` the best candidate's rank score. At most ``cfg.max_areas`` are kept and
+    ``cfg.keep_ratio ×`` the best candidate's rank score and, with ``cfg.keep_budget < 1``, leave
+    the union of the kept boxes within that share of the valid pixels (else it is skipped and the
+    next candidate tried). At most ``cfg.max_areas`` are kept and
     ``cfg.max_areas + cfg.purity_candidates − 1`` candidates tried. If none passed: the
     best-ranked candidate, or nothing with ``cfg.fail_safe`` (the caller keeps the whole map).
 
@@ -154,6 +156,11 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         if first is None:
             first = done
         if done.purity >= cfg.min_purity and done.solidity >= cfg.min_solidity:
+            if kept and cfg.keep_budget < 1:
+                union = reduce_map([a.box for a in kept] + [done.box], ctx.valid, tolerance_px=0.0,
+                                   tolerance_frac=0.0, tolerance_image=0.0, integral=ctx.integral)
+                if union.kept_union > cfg.keep_budget * max(union.valid_total, 1):
+                    continue  # it would not fit the reduction budget; a smaller one may
             kept.append(done)
             taken[torch.tensor(done.neurons)] = True
             if len(kept) == areas_max:

@@ -156,7 +156,8 @@ def test_bad_input_fails_and_leaves_no_output(tmp_path, make, message):
     assert message in proc.stderr + log, proc.stderr[-2000:]
     assert _our_files(run_dir) == []
     assert not (run_dir / "tb").exists()
-    assert {p.name for p in run_dir.iterdir()} <= {".hydra", "run.log"}
+    assert {p.name for p in run_dir.iterdir()} <= {".hydra", "run.log", "FAILED"}
+    assert "failed" in (run_dir / "FAILED").read_text()  # marked, so no one takes it for a run
 
 
 def test_bad_som_value_fails_and_leaves_no_output(tmp_path):
@@ -265,3 +266,29 @@ def test_bad_input_ends_in_one_line_on_stderr_and_exit_status_2(tmp_path, overri
     assert "Traceback" not in err and len(err.splitlines()) == 1 and err.startswith("error: ")
     for w in words:
         assert w in err
+
+
+@pytest.mark.parametrize("value, hint", [(0.0, "all-zero map"), (7.0, "constant map")])
+def test_a_constant_map_is_refused_before_work(tmp_path, value, hint):
+    np.save(tmp_path / "flat.npy", np.full((40, 50), value, np.float32))
+    proc = _run(tmp_path / "run", "data=file", f"data.source={tmp_path / 'flat.npy'}")
+    assert proc.returncode == 2 and hint in proc.stderr and "flat" in proc.stderr
+    assert (tmp_path / "run" / "FAILED").exists() and not (tmp_path / "run" / "metrics.json").exists()
+
+
+def test_a_file_input_names_its_folder_and_scene(tmp_path):
+    rng = np.random.default_rng(0)
+    d = (5 + rng.random((60, 80))).astype(np.float32)
+    d[20:40, 20:50] = 30.0
+    np.save(tmp_path / "my_scan_07.npy", d)
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    proc = subprocess.run([sys.executable, "-m", "experiments.run", "data=file", f"data.source={tmp_path / 'my_scan_07.npy'}",
+                           f"paths.output_dir={tmp_path / 'out'}", "output.pointcloud=false"],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    _ok(proc)
+    runs = list((tmp_path / "out" / "run" / "my_scan_07").glob("*/metrics.json"))
+    assert len(runs) == 1
+    m = json.loads(runs[0].read_text())
+    assert m["scene"]["name"] == "my_scan_07"
+    assert m["scene"]["invalid_pixels"] == 0 and "removed_pixels" not in m["scene"]
+    assert all(isinstance(x["kept_everything"], bool) for x in m["members"])

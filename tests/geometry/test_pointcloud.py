@@ -333,3 +333,18 @@ def test_middlebury_motorcycle_reconstructs_to_a_plausible_cloud():
     assert 1.0 < width < 5.0  # a motorcycle scene a few metres wide
     reduced = cloud.voxel_downsample(0.02)
     assert 0 < len(reduced) < len(cloud) / 4 and reduced.nbytes < cloud.nbytes / 4
+
+
+def test_ply_header_carries_the_units_comment(tmp_path):
+    pytest.importorskip("open3d")
+    from somtorch.geometry import write_ply
+    from somtorch.geometry.ply import read_ply
+
+    cloud = PointCloud(torch.rand(5, 3), colors=torch.rand(5, 3))
+    path = write_ply(cloud, tmp_path / "c.ply", comment="x y z in m (the baseline's unit)")
+    header = path.read_bytes().split(b"end_header")[0].decode()
+    assert "comment x y z in m (the baseline's unit)" in header.splitlines()
+    back = read_ply(path)
+    assert torch.allclose(back.points, cloud.points)  # the body is untouched
+    with pytest.raises(ValueError, match="one line"):
+        write_ply(cloud, tmp_path / "d.ply", comment="two\nlines")
