@@ -40,9 +40,13 @@ def schema_keys(schema: type, prefix: str = "") -> tuple[set[str], set[str]]:
     return keys, open_keys
 
 
-def _groups() -> dict[str, list[str]]:
-    return {d.name: sorted(p.stem for p in d.glob("*.yaml")) for d in CONF.iterdir()
-            if d.is_dir() and any(d.glob("*.yaml"))}
+NOT_GROUPS = ("scene_lists", "labels")  # folders of conf/ that hold data, not Hydra options
+
+
+def config_groups() -> dict[str, list[str]]:
+    """``{group: [options]}`` of the Hydra config groups in ``conf/``."""
+    return {d.name: sorted(p.stem for p in d.glob("*.yaml")) for d in sorted(CONF.iterdir())
+            if d.is_dir() and d.name not in NOT_GROUPS and any(d.glob("*.yaml"))}
 
 
 def _hint(word: str, known: list[str]) -> str:
@@ -54,7 +58,7 @@ def _hint(word: str, known: list[str]) -> str:
 def check_overrides(argv: list[str], schema: type) -> str | None:
     """The error line for the first unknown key or group option in ``argv``, or None."""
     keys, open_keys = schema_keys(schema)
-    groups = _groups()
+    groups = config_groups()
     for arg in argv:
         if arg.startswith("-") or "=" not in arg or arg[0] in "+~":
             continue

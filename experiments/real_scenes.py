@@ -27,6 +27,13 @@ against the union of the labelled objects, :mod:`somtorch.saliency_metrics`), me
 
 from __future__ import annotations
 
+import sys
+
+if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
+    from experiments.help import maybe_print_help
+
+    maybe_print_help("real_scenes")
+
 import logging
 import time
 from dataclasses import dataclass, field

@@ -14,6 +14,13 @@ Examples::
 
 from __future__ import annotations
 
+import sys
+
+if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
+    from experiments.help import maybe_print_help
+
+    maybe_print_help("run")
+
 import logging
 import shutil
 import tempfile

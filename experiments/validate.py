@@ -24,6 +24,13 @@ and ``validate.md`` into the Hydra run folder.
 
 from __future__ import annotations
 
+import sys
+
+if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
+    from experiments.help import maybe_print_help
+
+    maybe_print_help("validate")
+
 import logging
 import time
 from dataclasses import dataclass, field

@@ -16,3 +16,18 @@ def shared_data() -> Path:
         pytest.skip(f"../shared/data not found: {SHARED_DATA} does not exist (the real sample data sits "
                     "next to the repository checkout); tests that read it are skipped")
     return SHARED_DATA
+
+
+# The fast subset (pytest -m "not slow", README): end-to-end suites that start processes, run
+# experiments or whole studies, and the quality gates, are "slow" as a group; other slow tests
+# carry @pytest.mark.slow themselves.
+_SLOW_PARTS = ("experiments", "quality", "fuzz")
+_SLOW_FILES = ("test_notebooks.py", "test_benchmarks.py", "test_distributed.py", "test_hostile_files.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    slow = pytest.mark.slow
+    for item in items:
+        parts = Path(str(item.fspath)).parts
+        if any(p in parts for p in _SLOW_PARTS) or parts[-1] in _SLOW_FILES:
+            item.add_marker(slow)

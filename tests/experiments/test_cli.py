@@ -66,3 +66,20 @@ def test_the_command_line_stops_in_one_line():
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
         "error: unknown config key 'objects.simlarity': did you mean 'objects.similarity'? (--cfg job prints every key)"]
+
+
+@pytest.mark.parametrize("module", ["run", "study", "validate", "real_scenes", "video"])
+def test_help_is_instant_and_lists_groups_and_keys(module):
+    proc = subprocess.run([sys.executable, "-m", f"experiments.{module}", "--help"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
+    assert f"python -m experiments.{module}" in out and "objects: paper, robust" in out
+    assert "objects.similarity=0.05" in out and "train.epochs=10" in out
+    assert "scene_lists" not in out
+
+
+def test_help_does_not_import_torch():  # what makes it instant (0.17 s here against 5.5 s with torch)
+    code = "import sys; from experiments.help import help_text; help_text('run'); print('torch' in sys.modules)"
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert proc.stdout.strip() == "False", proc.stderr

@@ -1,0 +1,32 @@
+"""Console entry points (``somtorch-run`` …): ``--help`` answers before torch or Hydra is imported."""
+
+from __future__ import annotations
+
+import importlib
+
+from experiments.help import maybe_print_help
+
+
+def _go(module: str) -> None:
+    maybe_print_help(module)
+    importlib.import_module(f"experiments.{module}").cli()
+
+
+def run() -> None:
+    _go("run")
+
+
+def study() -> None:
+    _go("study")
+
+
+def validate() -> None:
+    _go("validate")
+
+
+def scenes() -> None:
+    _go("real_scenes")
+
+
+def video() -> None:
+    _go("video")
