@@ -6,8 +6,8 @@ Hydra multirun or single-run folder of ``python -m experiments.study`` — and w
 
 * ``results.csv`` — one row per job, quality only (deterministic: identical for identical configs
   and seeds whatever the launcher); ``timings.csv`` — wall and per-stage times;
-* ``table1.md/.csv`` — runs identifying 100 % / ≥ 95 % of the object, useful hits (paper Table 1);
-* ``table2.md/.csv`` — reduction x_min / mean / x_max over the completely identified runs, x_opt,
+* ``table1.md/.csv/.png`` — runs identifying 100 % / ≥ 95 % of the object, useful hits (paper Table 1);
+* ``table2.md/.csv/.png`` — reduction x_min / mean / x_max over the completely identified runs, x_opt,
   union mask and separate crops (paper Table 2); ``per_object.md``;
 * ``runtime.md/.png`` — time per stage against training pixels with the fitted growth exponent;
 * ``stability.md/.png`` — distributions (box plots, outliers marked) of area, reduction, runtime;
@@ -201,6 +201,10 @@ def aggregate(folders: list[Path], out: Path) -> dict[str, Path]:
                                                         "crops_x_max", "reduction_95_mean")} for r in rows
                                 if "identified_95" in r]))
         put("per_object.md", per_object_md(jobs))
+        from experiments.study_sections import tables_plot
+
+        for name in tables_plot(rows, out, PAPER_TABLE1, PAPER_TABLE2):
+            written[name] = out / name
     for name, fn in (("runtime", runtime_section), ("stability", stability_section), ("grid", grid_section)):
         text = fn(jobs, out)
         put(f"{name}.md", text)

@@ -216,3 +216,51 @@ def _finish(fig, path: Path) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     _pyplot().close(fig)
+
+
+def tables_plot(rows: list[dict], out: Path, paper1: list[tuple], paper2: list[tuple]) -> list[str]:
+    """``table1.png`` (runs identifying 100 % / ≥ 95 % of the object and useful hits, as a share
+    of the runs, beside the paper's Table 1) and ``table2.png`` (reduction x_min … x_max with the
+    mean, and x_opt, beside the paper's Table 2). Returns the names written."""
+    import numpy as np
+
+    scored = [r for r in rows if "identified_95" in r]
+    if not scored:
+        return []
+    plt = _pyplot()
+    labels = [f"{r['mode']} {r['scene']}\n{r['config']}" for r in scored]
+    names = []
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.2 * (len(scored) + len(paper1))), 4.2))
+    x = np.arange(len(scored))
+    for j, (key, name) in enumerate([("identified_100", "100 % identified"), ("identified_95", "≥ 95 % identified"),
+                                     ("useful_hits", "useful hits")]):
+        ax.bar(x + (j - 1) * 0.27, [100.0 * r[key] / r["runs"] for r in scored], 0.27, label=name)
+    xp = np.arange(len(scored), len(scored) + len(paper1)) + 0.5
+    ax.bar(xp - 0.135, [a for _, a, _ in paper1], 0.27, color="0.55", label="paper: 100 %")
+    ax.bar(xp + 0.135, [b for _, _, b in paper1], 0.27, color="0.8", label="paper: 95 %")
+    ax.set_xticks(list(x) + list(xp), labels + [f"paper\n{n}" for n, _, _ in paper1], fontsize=8)
+    ax.set_ylabel("runs [% of the runs]")
+    ax.set_ylim(0, 105)
+    ax.set_title("Table 1: identification of the object (ours: this sweep; paper: its synthetic scenes)")
+    ax.legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.22), frameon=False)
+    _finish(fig, out / "table1.png")
+    names.append("table1.png")
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.2 * (len(scored) + len(paper2))), 4.2))
+    for i, r in enumerate(scored):
+        if r.get("x_min") is not None:
+            ax.plot([i, i], [r["x_min"], r["x_max"]], color="C0", lw=2)
+            ax.plot(i, r["x_mean"], "o", color="C0", label="ours: x_min … x_max, mean" if i == 0 else None)
+        ax.plot(i, r["x_opt"], "k_", ms=18, mew=2, label="x_opt (exactly the object's box)" if i == 0 else None)
+    for j, (n, lo, mean, hi, opt) in enumerate(paper2):
+        i = len(scored) + j + 0.5
+        ax.plot([i, i], [lo, hi], color="0.5", lw=2)
+        ax.plot(i, mean, "o", color="0.5", label="paper: x_min … x_max, mean" if j == 0 else None)
+        ax.plot(i, opt, "_", color="0.3", ms=18, mew=2)
+    ax.set_xticks(list(range(len(scored))) + [len(scored) + j + 0.5 for j in range(len(paper2))],
+                  labels + [f"paper\n{n}" for n, *_ in paper2], fontsize=8)
+    ax.set_ylabel("reduction [%] (completely identified runs)")
+    ax.set_title("Table 2: data reduction")
+    ax.legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.22), frameon=False)
+    _finish(fig, out / "table2.png")
+    names.append("table2.png")
+    return names

@@ -110,6 +110,7 @@ def write_maps(scene: Scene, result: PipelineResult, out_dir: Path, member: int 
             result.features.to_pixel_units(result.som.weight.detach()[e]), result.som.grid_d2)
     for name, img in pics.items():
         viz.save_png(img, out_dir / f"{name}.png")
+    viz.summary_figure(scene, result, out_dir / "summary.png", member=e)
     with atomic_path(out_dir / "reduced.npz") as tmp:
         with open(tmp, "wb") as f:
             np.savez_compressed(
@@ -144,7 +145,9 @@ def write_point_clouds(scene: Scene, result: PipelineResult, out_dir: Path, *, m
     if len(reduced):
         write_ply(reduced, out_dir / "cloud_reduced.ply", comment=units)
         if render:
-            info["render_backend"] = render_point_cloud(reduced, out_dir / "cloud_reduced.png",
-                                                        backend=render_backend, view="oblique")
+            info["render_backend"] = render_point_cloud(
+                reduced, out_dir / "cloud_reduced.png", backend=render_backend, view="oblique",
+                unit=cam.baseline_unit, title=f"{scene.name}: reduced point cloud, {len(reduced):,} points "
+                                              "(depth clipped to its 1-99 % range)")
     info["seconds"] = time.perf_counter() - t0
     return info

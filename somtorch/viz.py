@@ -126,3 +126,98 @@ def image_or_disparity(image: torch.Tensor | None, disparity: torch.Tensor, vali
     if image is not None:
         return image.permute(1, 2, 0).contiguous().cpu().numpy()
     return grey(disparity, valid)
+
+
+# ------------------------------------------------------------------------------- summary figure
+TINTS = [(255, 60, 60), (255, 160, 0), (200, 60, 255), (0, 200, 200)]
+"""Colours of the kept areas in :func:`draw_areas` (area 1, 2, …), also the summary's legend."""
+
+
+def summary_figure(scene, result, path: str | os.PathLike, member: int = 0) -> Path:
+    """The paper's Fig. 18 for one member, figure-ready: (a) disparity with its colour bar in px,
+    invalid pixels grey and the removed ground hatched blue; (b) the SOM's reference vectors over
+    it; (c) the segments; (d) the object areas (kept ones tinted, their boxes, the labelled object
+    outlined) with a legend; (e) what is kept (valid pixels inside the boxes) and (f) the reduced
+    map with the same colour scale as (a). The title carries the verdict. Written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    from .tasks.segmentation import color_map
+
+    m = result.members[member]
+    lab = result.labels[member]
+    valid = scene.valid.numpy()
+    d = np.where(valid, scene.disparity.numpy(), np.nan)
+    lo, hi = (np.nanpercentile(d, [1, 99]) if valid.any() else (0.0, 1.0))
+    ground = result.ground.mask.numpy() if result.ground is not None else None
+    h, w = d.shape
+    fig, axes = plt.subplots(2, 3, figsize=(15, 10 * h / w + 1.6), dpi=80, constrained_layout=True)
+    cmap = matplotlib.colormaps["turbo"].copy()
+    cmap.set_bad((0.55, 0.55, 0.55))
+
+    def disparity_panel(ax, values, title):
+        im = ax.imshow(values, cmap=cmap, vmin=lo, vmax=hi, interpolation="nearest")
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02, label="disparity [px]")
+        ax.set_title(title)
+
+    disparity_panel(axes[0, 0], d, "(a) disparity (grey: no value)")
+    if ground is not None:
+        axes[0, 0].contourf(ground.astype(float), levels=[0.5, 1.5], colors="none", hatches=["///"])
+        axes[0, 0].set_title("(a) disparity (grey: no value; hatched: ground plane)")
+    ax = axes[0, 1]
+    if result.som is not None:
+        ax.imshow(draw_reference_vectors(colorize(scene.disparity, scene.valid),
+                                         result.features.to_pixel_units(result.som.weight.detach()[member]),
+                                         result.som.grid_d2))
+        ax.set_title(f"(b) SOM {result.som.rows}x{result.som.cols}: reference vectors and grid links")
+    else:
+        ax.imshow(colorize(scene.disparity, scene.valid))
+        ax.set_title(f"(b) method {result.method}: no SOM grid")
+    seg = color_map(lab[None], result.num_segments, seed=0)[0].numpy()
+    axes[0, 2].imshow(seg, interpolation="nearest")
+    axes[0, 2].set_title(f"(c) segments: one per neuron ({result.num_segments}; black: none)")
+    back = image_or_disparity(scene.image, scene.disparity, scene.valid)
+    obj = scene.main_object_mask if scene.objects is not None else None
+    axes[1, 0].imshow(draw_areas(back, lab, [a.neurons for a in m.kept], m.reduction.boxes, obj,
+                                 extra_mask=result.ground.mask if result.ground is not None else None))
+    handles = [Patch(color=np.array(TINTS[i % len(TINTS)]) / 255, label=f"kept area {i + 1}"
+                     + (f" (confidence {a.confidence:.2f})" if a.confidence is not None else ""))
+               for i, a in enumerate(m.kept)]
+    handles.append(Patch(facecolor="none", edgecolor=(1, 1, 0), linewidth=2, label="kept box (with tolerance)"))
+    if obj is not None:
+        handles.append(Patch(facecolor="none", edgecolor=(0, 1, 0), linewidth=2, label="labelled object"))
+    if ground is not None:
+        handles.append(Patch(color=(40 / 255, 90 / 255, 1.0), alpha=0.5, label="ground plane (removed)"))
+    axes[1, 0].legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.24), ncol=2, fontsize=8,
+                      frameon=False)
+    axes[1, 0].set_title("(d) object areas" + (" — no convincing area: whole map kept" if m.no_object else ""))
+    kept = np.zeros((h, w), np.int8)
+    kept[valid] = 1
+    kept[valid & m.reduction.mask.numpy()] = 2
+    axes[1, 1].imshow(kept, cmap=ListedColormap([(0.55, 0.55, 0.55), (0.85, 0.85, 0.85), (0.1, 0.45, 0.85)]),
+                      vmin=0, vmax=2, interpolation="nearest")
+    axes[1, 1].legend(handles=[Patch(color=(0.1, 0.45, 0.85), label=f"kept ({m.reduction.kept_union:,} px)"),
+                               Patch(color=(0.85, 0.85, 0.85), label="removed"),
+                               Patch(color=(0.55, 0.55, 0.55), label="no disparity")],
+                      loc="upper center", bbox_to_anchor=(0.5, -0.24), ncol=3, fontsize=8, frameon=False)
+    axes[1, 1].set_title(f"(e) kept region: reduction {m.reduction.reduction_union:.1f} %")
+    disparity_panel(axes[1, 2], np.where(valid & m.reduction.mask.numpy(), d, np.nan), "(f) reduced map")
+    for ax in axes.flat:
+        ax.set_xlabel("x [px]")
+        ax.set_ylabel("y [px]")
+    verdict = ""
+    if m.score is not None:
+        s = m.score
+        verdict = (f" — object {s.identified_fraction:.0%} identified, x_opt {s.x_opt:.1f} %: "
+                   f"{'useful' if s.useful_hit else 'not useful'}")
+    fig.suptitle(f"{scene.name}, member {member} (seed {m.seed}), {len(m.kept)} kept area(s), reduction "
+                 f"{m.reduction.reduction_union:.1f} %{verdict}", fontsize=13)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return path

@@ -93,7 +93,8 @@ def open3d_rendering_available() -> tuple[bool, str]:
 
 def render_point_cloud(cloud: PointCloud, path: str | os.PathLike[str], *, width: int = 800,
                        height: int = 600, backend: str = "auto", point_size: float = 2.0,
-                       view: str = "front") -> str:
+                       view: str = "front", unit: str | None = None, title: str | None = None,
+                       depth_percentiles: tuple[float, float] | None = (1.0, 99.0)) -> str:
     """Render a cloud to a PNG file (written atomically) and return the backend that drew it.
 
     Points without colours are coloured by depth (``z``, viridis). The picture is in the camera
@@ -107,6 +108,11 @@ def render_point_cloud(cloud: PointCloud, path: str | os.PathLike[str], *, width
             ``"open3d"`` (raise ``RuntimeError`` if it cannot render) or ``"matplotlib"``.
         point_size: point diameter in pixels.
         view: ``"front"`` (along +z, like the stereo camera) or ``"oblique"`` (from above right).
+        unit: the unit of x y z, written on the axes (matplotlib backend).
+        title: a title above the view (matplotlib backend).
+        depth_percentiles: only points whose depth lies between these percentiles are drawn (a
+            few far points — stereo mismatches near zero disparity — would squash the rest); None
+            draws every point.
 
     Returns:
         ``"open3d"`` or ``"matplotlib"``.
@@ -141,8 +147,15 @@ def render_point_cloud(cloud: PointCloud, path: str | os.PathLike[str], *, width
                                "apt-get install -y libvulkan1 mesa-vulkan-drivers).")
         else:
             log.info("Open3D offscreen rendering unavailable (%s); using matplotlib", reason)
+    if depth_percentiles is not None:
+        z = cloud.points[:, 2].detach().cpu().double()
+        lo_q, hi_q = (float(q) for q in torch.quantile(z, torch.tensor(depth_percentiles, dtype=torch.float64) / 100))
+        keep = (z >= lo_q) & (z <= hi_q)
+        if bool(keep.any()) and not bool(keep.all()):
+            cloud = PointCloud(cloud.points[keep], None if cloud.colors is None else cloud.colors[keep],
+                               None if cloud.pixels is None else cloud.pixels[keep])
     with _atomic_output(path) as tmp:
-        _render_matplotlib(cloud, tmp, width, height, point_size, view)
+        _render_matplotlib(cloud, tmp, width, height, point_size, view, unit, title)
     return "matplotlib"
 
 
@@ -167,7 +180,7 @@ def _view_direction(view: str) -> tuple[float, float, float]:
 
 
 def _render_matplotlib(cloud: PointCloud, path: Path, width: int, height: int, point_size: float,
-                       view: str) -> None:
+                       view: str, unit: str | None = None, title: str | None = None) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (registers the "3d" projection)
@@ -199,14 +212,19 @@ def _render_matplotlib(cloud: PointCloud, path: Path, width: int, height: int, p
     ax.set_ylim(lows[1], lows[1] + spans[1])
     ax.set_zlim(lows[2], lows[2] + spans[2])
     ax.set_box_aspect(spans, zoom=1.15)  # equal scaling on all three axes
-    ax.set_xlabel("x")
-    ax.set_zlabel("-y")
+    u_txt = f" [{unit}]" if unit else ""
+    ax.set_xlabel(f"x{u_txt}")
+    ax.set_zlabel(f"-y{u_txt}")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_major_locator(__import__("matplotlib.ticker", fromlist=["MaxNLocator"]).MaxNLocator(5))
     elev, azim = _VIEWS[view]
     if view == "front":  # the depth axis is edge-on: drop its ticks, draw without perspective
         ax.set_proj_type("ortho")
         ax.set_yticks([])
     else:
-        ax.set_ylabel("z (depth)")
+        ax.set_ylabel(f"z (depth){u_txt}")
     ax.view_init(elev=elev, azim=-90.0 + azim)  # azim -90: the viewer sits at -z and looks along +z
     fig.savefig(path, format="png", dpi=dpi, facecolor="white")
 

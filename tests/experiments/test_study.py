@@ -210,6 +210,11 @@ def test_table1_sweep_aggregates_into_the_paper_s_tables(tmp_path, shared_data):
     md = (tmp_path / "agg" / "table2.md").read_text()
     assert "NOR stair | 12.56 | 79.13" in md and "kitti2015" in md
     assert "kitti2015" in (tmp_path / "agg" / "per_object.md").read_text()
+    import matplotlib.image as mpimg
+
+    for name in ("table1.png", "table2.png"):  # the plots the README promises
+        img = mpimg.imread(tmp_path / "agg" / name)
+        assert img.shape[0] > 200 and img.shape[1] > 400 and img[..., :3].std() > 0.05  # not blank
 
 
 def test_optuna_sweeper_searches_and_reports_the_best_trade_off(tmp_path, shared_data):
