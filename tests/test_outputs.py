@@ -117,7 +117,10 @@ def test_write_maps_writes_six_pngs_and_the_reduced_npz(tmp_path, motorcycle, re
     h, w = motorcycle.height, motorcycle.width
     pics = write_maps(motorcycle, result, tmp_path, member=member)
     assert set(pics) == set(MAPS)
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([f"{n}.png" for n in MAPS] + ["reduced.npz"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([f"{n}.png" for n in MAPS] + ["reduced.npz",
+                                                                                              "summary.png"])
+    summary = cv2.imread(str(tmp_path / "summary.png"))
+    assert summary.shape[1] >= 1000 and summary.std() > 10  # the six-panel figure, not blank
     for name in MAPS:
         back = cv2.imread(str(tmp_path / f"{name}.png"), cv2.IMREAD_UNCHANGED)
         assert back.shape == (h, w, 3)
