@@ -295,9 +295,9 @@ class AreaConfig(Validated):
     solidity_size: float = 0.02
     purity_candidates: int = 5
     select: str = "salient"
-    max_areas: int = 2
-    keep_ratio: float = 0.75
-    keep_budget: float = 1.0
+    max_areas: int = 4
+    keep_ratio: float = 0.2
+    keep_budget: float = 0.3
     fail_safe: bool = True
     min_contrast: float = 0.0
     max_area_frac: float = 0.7
