@@ -44,23 +44,23 @@ def load_input(cfg: RunConfig):
     """The scene named by ``cfg.data`` (every check on the files happens here, before any work)."""
     from somtorch.disparity.io import read_image
     from somtorch.disparity.scene import Camera, load_scene
-    from somtorch.disparity.stereo import SGBMParams, scene_from_stereo
+    from somtorch.disparity.stereo import SGBMParams, load_stereo_pair
 
     d = cfg.data
     if d.left is not None or d.right is not None:
         if d.left is None or d.right is None:
             raise ValueError("data.left and data.right must both be set for a stereo pair")
-        left, right = read_image(to_absolute_path(d.left)), read_image(to_absolute_path(d.right))
+        left_path, right_path = to_absolute_path(d.left), to_absolute_path(d.right)
         camera = None
         if (d.focal_px is None) != (d.baseline is None):
             raise ValueError("data.focal_px and data.baseline must be given together (or neither)")
         if d.focal_px is not None:
-            h, w = left.shape[-2:]
+            h, w = read_image(left_path).shape[-2:]
             camera = Camera(focal_px=d.focal_px, cx=d.cx if d.cx is not None else (w - 1) / 2,
                             cy=d.cy if d.cy is not None else (h - 1) / 2, baseline=d.baseline,
                             baseline_unit=d.baseline_unit, doffs=d.doffs)
-        return scene_from_stereo(left, right, SGBMParams.from_dict(dict(d.sgbm)), camera=camera,
-                                 name=d.name or Path(d.left).stem)
+        return load_stereo_pair(left_path, right_path, SGBMParams.from_dict(dict(d.sgbm)), camera=camera,
+                                name=d.name or Path(d.left).stem)
     if d.source is None:
         raise ValueError("data.source is empty: give 'motorcycle', a scene folder or a disparity file")
     spec = d.source if d.source == "motorcycle" else to_absolute_path(d.source)

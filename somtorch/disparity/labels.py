@@ -45,7 +45,7 @@ def read_polygon_labels(path: str | Path, hw: tuple[int, int]) -> tuple[torch.Te
     objects = doc.get("objects")
     if not isinstance(objects, list) or not objects:
         raise DataFileError(path, "field 'objects' must be a non-empty list")
-    out = np.zeros((h, w), dtype=np.uint8 if len(objects) < 255 else np.int32)
+    out = np.zeros((h, w), dtype=np.int32)
     info: list[ObjectInfo] = []
     masks: list[tuple[int, np.ndarray]] = []
     for k, o in enumerate(objects):
@@ -53,8 +53,8 @@ def read_polygon_labels(path: str | Path, hw: tuple[int, int]) -> tuple[torch.Te
         if not isinstance(o, dict):
             raise DataFileError(path, f"{where} must be an object")
         oid = o.get("id")
-        if not isinstance(oid, int) or isinstance(oid, bool) or oid < 1:
-            raise DataFileError(path, f"{where}.id must be an integer >= 1; got {oid!r}")
+        if not isinstance(oid, int) or isinstance(oid, bool) or not 1 <= oid < 2 ** 31:
+            raise DataFileError(path, f"{where}.id must be an integer in [1, 2^31); got {str(oid)[:40]}")
         if oid in {i.id for i in info}:
             raise DataFileError(path, f"{where}.id {oid} is used twice")
         name = o.get("name", f"object_{oid}")

@@ -12,6 +12,7 @@ import dataclasses
 import logging
 import numbers
 from collections.abc import Mapping
+from pathlib import Path
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,7 +21,7 @@ import numpy as np
 import torch
 
 from somtorch.disparity.scene import Camera, Scene, scene_from_arrays
-from somtorch.validation import check_choice
+from somtorch.validation import DataFileError, check_choice
 
 __all__ = ["SGBM_MODES", "SGBMParams", "compute_disparity", "scene_from_stereo"]
 
@@ -212,3 +213,27 @@ def scene_from_stereo(
     return scene_from_arrays(disparity, valid, image=image, camera=camera, name=name,
                              source={"disparity": f"StereoSGBM {dataclasses.asdict(params)}",
                                      "image": "left image of the pair", "layout": "stereo"})
+
+
+def load_stereo_pair(left: str | Path, right: str | Path, params: SGBMParams | None = None,
+                     camera: Camera | None = None, *, name: str | None = None) -> Scene:
+    """Read a rectified pair from its two files and compute the :class:`Scene` (every error names
+    the file it is about: an unreadable image, two sizes that do not match, an image too narrow
+    for the disparity range).
+
+    Raises:
+        DataFileError: the files cannot be used as a pair.
+        FileNotFoundError: a file is missing.
+    """
+    from .io import read_image
+
+    params = SGBMParams() if params is None else params
+    lt, rt = read_image(left), read_image(right)
+    if tuple(lt.shape) != tuple(rt.shape):
+        raise DataFileError(right, f"is {rt.shape[-1]}x{rt.shape[-2]} px ({rt.shape[0]} channel(s)) but the left "
+                                   f"image {left} is {lt.shape[-1]}x{lt.shape[-2]} ({lt.shape[0]}): a rectified "
+                                   "pair has one size")
+    try:
+        return scene_from_stereo(lt, rt, params, camera, name=name or Path(left).stem)
+    except ValueError as e:
+        raise DataFileError(left, f"with {Path(right).name}: {e}") from None

@@ -75,3 +75,13 @@ def test_repository_labels_fit_their_scenes(shared_data):
             assert share > 0.35, (spec.name, o.name, share)
         main = scene.main_object_mask
         assert float((main & scene.valid).sum()) / float(main.sum()) > 0.5
+
+
+def test_ids_above_255_and_huge_ids(tmp_path):
+    """Found by the fuzzer: ids beyond uint8 must not wrap, ids beyond int32 are refused."""
+    p = _write(tmp_path, [{"id": 300, "name": "big", "polygons": [[[0, 0], [3, 0], [3, 3], [0, 3]]]}])
+    objects, _ = read_polygon_labels(p, (10, 10))
+    assert int(objects.max()) == 300
+    p = _write(tmp_path, [{"id": 10 ** 30, "polygons": [[[0, 0], [3, 0], [3, 3]]]}])
+    with pytest.raises(DataFileError, match="id must be an integer"):
+        read_polygon_labels(p, (10, 10))

@@ -25,6 +25,9 @@ import somtorch.disparity.io as sio
 from somtorch import SOM
 from somtorch.disparity.camera import _oakd_camera, read_middlebury_camera
 from somtorch.disparity.io import read_disparity, read_image, read_json, read_mask, write_pfm
+from somtorch.disparity.labels import read_polygon_labels
+from somtorch.disparity.loading import load_scene
+from somtorch.disparity.stereo import SGBMParams, load_stereo_pair
 
 CASES = int(os.environ.get("FUZZ_CASES", 2000))
 TIME_BOUND_S = 2.0
@@ -55,6 +58,20 @@ def _seeds(tmp: Path) -> dict[str, Path]:
     files["oakd"] = tmp / "stereodemo_calibration.json"
     (tmp / "objects.json").write_text(json.dumps({"objects": [{"id": 1, "name": "a", "main": True}]}))
     files["json"] = tmp / "objects.json"
+    # a stereo pair (right image mutated) and a scene folder (its objects.json mutated)
+    left = rng.integers(0, 255, (12, 48, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp / "left.png"), left)
+    cv2.imwrite(str(tmp / "right.png"), np.roll(left, -3, axis=1))
+    files["stereo"] = tmp / "right.png"
+    scene = tmp / "scene"
+    scene.mkdir()
+    write_pfm(scene / "disp0GT.pfm", d)
+    cv2.imwrite(str(scene / "objects.png"), (d > 20).astype(np.uint8))
+    (scene / "objects.json").write_text(json.dumps({"objects": [{"id": 1, "name": "a", "main": True}]}))
+    files["scene"] = scene / "objects.json"
+    (tmp / "labels.json").write_text(json.dumps({"size_hw": [12, 16], "objects": [
+        {"id": 1, "name": "a", "main": True, "polygons": [[[1, 1], [10, 1], [10, 8], [1, 8]]]}]}))
+    files["labels"] = tmp / "labels.json"
     som = SOM(2, 3, 3, ensemble=2, seed=0)
     som.weight = torch.rand(2, 6, 3, generator=torch.Generator().manual_seed(0))
     files["checkpoint"] = som.save(tmp / "m.safetensors")
@@ -104,6 +121,9 @@ READERS = {
     "oakd": lambda p: _oakd_camera(p.parent, (12, 16)),
     "json": lambda p: read_json(p),
     "checkpoint": lambda p: SOM.load(p),
+    "stereo": lambda p: load_stereo_pair(p.parent / "left.png", p, SGBMParams(numDisparities=16, blockSize=3)),
+    "scene": lambda p: load_scene(p.parent),
+    "labels": lambda p: read_polygon_labels(p, (12, 16)),
 }
 
 
@@ -113,6 +133,11 @@ def _check_result(kind: str, out) -> None:
         disp, valid = out
         assert disp.shape == valid.shape and disp.dtype == torch.float32 and valid.dtype == torch.bool
         assert bool(torch.isfinite(disp).all()) and bool((disp[valid] >= 0).all())
+    elif kind in ("stereo", "scene"):
+        assert out.disparity.shape == out.valid.shape and bool(torch.isfinite(out.disparity).all())
+    elif kind == "labels":
+        objects, info = out
+        assert objects.shape == (12, 16) and {o.id for o in info} >= set(objects.unique().tolist()) - {0}
     elif kind == "checkpoint":
         assert bool(torch.isfinite(out.weight).all()) and out.weight.shape[1] == out.rows * out.cols
 
