@@ -21,6 +21,7 @@ if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
 
     maybe_print_help("run")
 
+import dataclasses
 import logging
 import shutil
 import tempfile
@@ -43,6 +44,7 @@ register()
 def load_input(cfg: RunConfig):
     """The scene named by ``cfg.data`` (every check on the files happens here, before any work)."""
     from somtorch.disparity.io import read_image
+    from somtorch.disparity.camera import read_calibration
     from somtorch.disparity.scene import Camera, load_scene
     from somtorch.disparity.stereo import SGBMParams, load_stereo_pair
 
@@ -52,6 +54,10 @@ def load_input(cfg: RunConfig):
             raise ValueError("data.left and data.right must both be set for a stereo pair")
         left_path, right_path = to_absolute_path(d.left), to_absolute_path(d.right)
         camera = None
+        if d.calibration is not None and d.focal_px is not None:
+            raise ValueError("give data.calibration or data.focal_px / data.baseline, not both")
+        if d.calibration is not None:
+            camera = read_calibration(to_absolute_path(d.calibration), tuple(read_image(left_path).shape[-2:]))
         if (d.focal_px is None) != (d.baseline is None):
             raise ValueError("data.focal_px and data.baseline must be given together (or neither)")
         if d.focal_px is not None:
@@ -59,13 +65,15 @@ def load_input(cfg: RunConfig):
             camera = Camera(focal_px=d.focal_px, cx=d.cx if d.cx is not None else (w - 1) / 2,
                             cy=d.cy if d.cy is not None else (h - 1) / 2, baseline=d.baseline,
                             baseline_unit=d.baseline_unit, doffs=d.doffs)
-        return load_stereo_pair(left_path, right_path, SGBMParams.from_dict(dict(d.sgbm)), camera=camera,
+        return load_stereo_pair(left_path, right_path, SGBMParams(**dataclasses.asdict(d.sgbm)), camera=camera,
                                 name=d.name or Path(d.left).stem)
     if d.source is None:
         raise ValueError("data.source is empty: give 'motorcycle', a scene folder or a disparity file")
     spec = d.source if d.source == "motorcycle" else to_absolute_path(d.source)
     disp = to_absolute_path(d.disparity_file) if d.disparity_file else None
     scene = load_scene(spec, disparity_file=disp)
+    if d.calibration is not None:
+        scene.camera = read_calibration(to_absolute_path(d.calibration), (scene.height, scene.width))
     if d.name:  # one name in the log, metrics.json and the run folder (kitti2015, not devkit_demo)
         scene.name = d.name
     return scene

@@ -7,6 +7,7 @@ library and the configs cannot drift apart.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import os
 import sys
@@ -19,6 +20,21 @@ from omegaconf import MISSING
 
 from somtorch.outputs import OutputConfig
 from somtorch.pipeline import PipelineConfig
+
+
+def _sgbm_schema() -> type:
+    """A mutable mirror of :class:`somtorch.disparity.stereo.SGBMParams` (same fields, types and
+    defaults, declared there once): ``data.sgbm.numDisparities=64`` is then a plain override."""
+    import typing
+
+    from somtorch.disparity.stereo import SGBMParams
+
+    hints = typing.get_type_hints(SGBMParams)
+    return dataclasses.make_dataclass("SGBMConfig", [(f.name, hints[f.name], field(default=f.default))
+                                                     for f in dataclasses.fields(SGBMParams)])
+
+
+SGBMConfig = _sgbm_schema()
 
 
 @dataclass
@@ -36,7 +52,7 @@ class DataConfig:
     disparity_file: Optional[str] = None
     left: Optional[str] = MISSING
     right: Optional[str] = MISSING
-    sgbm: dict[str, Any] = field(default_factory=dict)
+    sgbm: SGBMConfig = field(default_factory=SGBMConfig)  # type: ignore[valid-type]
     name: Optional[str] = None
     # camera of a stereo pair (point clouds need it): focal length and principal point in px,
     # baseline in baseline_unit; cx/cy default to the image centre
@@ -46,6 +62,9 @@ class DataConfig:
     cx: Optional[float] = None
     cy: Optional[float] = None
     doffs: float = 0.0
+    # or one calibration file: stereodemo JSON, Middlebury/ETH3D calib.txt or KITTI calib_cam_to_cam.txt
+    # (replaces the folder's own camera for a scene or file too)
+    calibration: Optional[str] = None
 
 
 @dataclass

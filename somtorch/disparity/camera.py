@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from somtorch.disparity.io import parse_middlebury_calib, read_json
-from somtorch.validation import DataFileError, check_choice, check_positive, check_tensor
+from somtorch.validation import DataFileError, check_choice, check_positive, check_tensor, require_file
 
 __all__ = ["Camera", "read_middlebury_camera"]
 
@@ -166,7 +166,10 @@ def _oakd_camera(folder: Path, hw: tuple[int, int]) -> tuple[Camera | None, str 
     path = folder / "stereodemo_calibration.json"
     if not path.is_file():
         return None, None
-    calib = read_json(path)
+    return _oakd_from(path, read_json(path), hw)
+
+
+def _oakd_from(path: Path, calib: dict, hw: tuple[int, int]) -> tuple[Camera, str]:
     missing = [k for k in ("width", "height", "fx", "cx0", "cx1", "cy", "baseline_meters") if k not in calib]
     if missing:
         raise DataFileError(path, f"calibration lacks {missing}; found keys {sorted(calib)}")
@@ -179,3 +182,60 @@ def _oakd_camera(folder: Path, hw: tuple[int, int]) -> tuple[Camera | None, str 
     cam = _camera(path, focal_px=calib["fx"], cx=calib["cx0"], cy=calib["cy"],
                   baseline=calib["baseline_meters"], baseline_unit="m", doffs=calib["cx1"] - calib["cx0"])
     return cam, str(path)
+
+
+def _kitti_calib_file(path: Path) -> Camera:
+    """KITTI ``calib_cam_to_cam.txt`` (``P_rect_02`` / ``P_rect_03``, the colour pair) or a per-frame
+    ``calib/000000.txt`` (``P2`` / ``P3``): f, cx, cy of the left and the baseline in metres."""
+    rows: dict[str, np.ndarray] = {}
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines()[:200]:
+        if ":" not in line:
+            continue
+        key, _, rest = line.partition(":")
+        try:
+            values = np.array([float(v) for v in rest.split()], dtype=np.float64)
+        except ValueError:
+            continue
+        if values.size == 12 and np.isfinite(values).all():
+            rows[key.strip()] = values.reshape(3, 4)
+    pair = next(((a, b) for a, b in (("P_rect_02", "P_rect_03"), ("P2", "P3")) if a in rows and b in rows), None)
+    if pair is None:
+        raise DataFileError(path, "a KITTI calibration needs P_rect_02 and P_rect_03 (calib_cam_to_cam.txt) or "
+                                  f"P2 and P3 (per-frame calib); found {sorted(rows)}")
+    p2, p3 = rows[pair[0]], rows[pair[1]]
+    if p2[0, 0] <= 0 or p3[0, 0] <= 0:
+        raise DataFileError(path, f"{pair[0]} / {pair[1]} have a focal length <= 0")
+    baseline = (p2[0, 3] / p2[0, 0]) - (p3[0, 3] / p3[0, 0])  # metres: P[0,3] = -f * t_x
+    return _camera(path, focal_px=float(p2[0, 0]), cx=float(p2[0, 2]), cy=float(p2[1, 2]),
+                   baseline=float(baseline), baseline_unit="m", doffs=float(p3[0, 2] - p2[0, 2]))
+
+
+def read_calibration(path: str | Path, hw: tuple[int, int] | None = None) -> Camera:
+    """The :class:`Camera` of a calibration file in any of the formats its users have: an OAK-D /
+    stereodemo ``stereodemo_calibration.json``, a Middlebury / ETH3D ``calib.txt`` (``cam0=[...]``),
+    or a KITTI ``calib_cam_to_cam.txt`` / per-frame ``calib/*.txt``. ``hw``: the image size, checked
+    where the file states one.
+
+    Raises:
+        DataFileError: not one of these formats, or a field is missing or malformed (named).
+        FileNotFoundError: no such file.
+    """
+    p = require_file(path, "calibration file")
+    head = p.read_bytes()[:4096].decode("utf-8", errors="replace")
+    if head.lstrip().startswith("{"):
+        calib = read_json(p)
+        if "fx" not in calib and "baseline_meters" not in calib:
+            raise DataFileError(p, "a JSON calibration must be in the stereodemo format (fx, cx0, cx1, cy, "
+                                   f"baseline_meters, width, height); found keys {sorted(calib)[:10]}")
+        if hw is None:
+            hw = (calib.get("height"), calib.get("width"))
+        return _oakd_from(p, calib, hw)[0]
+    if "cam0" in head:
+        if hw is not None:
+            calib = parse_middlebury_calib(p)
+            _check_calib_size(p, (calib.get("height", hw[0]), calib.get("width", hw[1])), hw)
+        return read_middlebury_camera(p)
+    if "P_rect_02" in head or "P2:" in head:
+        return _kitti_calib_file(p)
+    raise DataFileError(p, "not a calibration this reads: expected stereodemo JSON (fx, baseline_meters ...), "
+                           "Middlebury calib.txt (cam0=[...], baseline=) or KITTI (P_rect_02/P_rect_03 or P2/P3)")

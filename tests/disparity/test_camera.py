@@ -83,3 +83,54 @@ def test_a_camera_matrix_that_is_not_a_matrix_and_non_numeric_fields_name_the_fi
     _oakd(tmp_path, cx0="left")
     with pytest.raises(DataFileError, match=r"stereodemo_calibration.json.*cx0.*must be numbers"):
         _oakd_camera(tmp_path, (480, 640))
+
+
+# ----------------------------------------------------------------------- read_calibration
+def test_read_calibration_knows_the_three_formats(tmp_path):
+    import json
+
+    from somtorch.disparity.camera import read_calibration
+
+    (tmp_path / "my_oakd.json").write_text(json.dumps(
+        {"width": 640, "height": 480, "fx": 451.0, "cx0": 299.0, "cx1": 299.0, "cy": 255.0, "baseline_meters": 0.075}))
+    cam = read_calibration(tmp_path / "my_oakd.json", (480, 640))
+    assert (cam.focal_px, cam.baseline, cam.baseline_unit) == (451.0, 0.075, "m")
+    (tmp_path / "calib.txt").write_text("cam0=[1000 0 300; 0 1000 200; 0 0 1]\ncam1=[1000 0 330; 0 1000 200; 0 0 1]\n"
+                                        "doffs=30\nbaseline=193.0\nwidth=640\nheight=480\n")
+    cam = read_calibration(tmp_path / "calib.txt", (480, 640))
+    assert (cam.focal_px, cam.doffs, cam.baseline_unit) == (1000.0, 30.0, "mm")
+    # KITTI calib_cam_to_cam.txt: P_rect_03[0, 3] = -f * baseline
+    (tmp_path / "calib_cam_to_cam.txt").write_text(
+        "calib_time: 09-Jan-2012 13:57:47\n"
+        "P_rect_02: 7.215377e+02 0 6.095593e+02 4.485728e+01 0 7.215377e+02 1.728540e+02 2.163791e-01 0 0 1 2.745884e-03\n"
+        "P_rect_03: 7.215377e+02 0 6.095593e+02 -3.395242e+02 0 7.215377e+02 1.728540e+02 2.199936e+00 0 0 1 2.729905e-03\n")
+    cam = read_calibration(tmp_path / "calib_cam_to_cam.txt")
+    assert cam.focal_px == pytest.approx(721.5377) and cam.cy == pytest.approx(172.854)
+    assert cam.baseline == pytest.approx(0.5327, abs=1e-3) and cam.baseline_unit == "m"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("hello", "not a calibration"),
+    ('{"a": 1}', "stereodemo format"),
+    ("P2: 1 2 3\n", "P_rect_02"),
+])
+def test_read_calibration_names_the_problem(tmp_path, text, message):
+    from somtorch.disparity.camera import read_calibration
+    from somtorch.validation import DataFileError
+
+    (tmp_path / "c.txt").write_text(text)
+    with pytest.raises(DataFileError, match=message) as e:
+        read_calibration(tmp_path / "c.txt")
+    assert "c.txt" in str(e.value)
+
+
+def test_size_mismatch_is_refused(tmp_path):
+    import json
+
+    from somtorch.disparity.camera import read_calibration
+    from somtorch.validation import DataFileError
+
+    (tmp_path / "c.json").write_text(json.dumps(
+        {"width": 640, "height": 480, "fx": 451.0, "cx0": 299.0, "cx1": 299.0, "cy": 255.0, "baseline_meters": 0.075}))
+    with pytest.raises(DataFileError, match="480x640"):
+        read_calibration(tmp_path / "c.json", (240, 320))
