@@ -81,8 +81,26 @@ def check_overrides(argv: list[str], schema: type) -> str | None:
 def run_checked(main: Any, schema: type, argv: list[str] | None = None) -> Any:
     """Check ``sys.argv`` against ``schema``, then call the Hydra ``main``; a bad key exits with
     status 2 and one line on stderr."""
+    if argv is None and any(a in ("--quiet", "-q") for a in sys.argv[1:]):
+        # --quiet: no progress bars, warnings and errors only (Hydra does not know the flag: drop it)
+        import os
+
+        sys.argv = [sys.argv[0]] + [a for a in sys.argv[1:] if a not in ("--quiet", "-q")]
+        os.environ["SOMTORCH_QUIET"] = "1"
     err = check_overrides(list(sys.argv[1:] if argv is None else argv), schema)
     if err is not None:
         print(f"error: {err}", file=sys.stderr)
         raise SystemExit(2)
     return main()
+
+
+def quiet() -> bool:
+    """``--quiet`` was given (or ``SOMTORCH_QUIET=1``)."""
+    import os
+
+    return os.environ.get("SOMTORCH_QUIET") == "1"
+
+
+def show_progress() -> bool:
+    """Progress bars only for a person watching: a terminal on stderr and no ``--quiet``."""
+    return not quiet() and sys.stderr.isatty()

@@ -105,19 +105,31 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
         if cfg.output.tensorboard:
             from torch.utils.tensorboard import SummaryWriter
             writer = SummaryWriter(str(stage / "tb"))
-        result = run_pipeline(scene, cfg, progress=False, log_training=writer.add_scalar if writer else None)
+        from tqdm.auto import tqdm
+
+        from experiments.cli import show_progress
+
+        steps = ["pipeline"] + (["maps"] if cfg.output.maps else []) + (["point clouds"] if cfg.output.pointcloud else [])
+        bar = tqdm(total=len(steps), desc=f"{scene.name}", unit="stage", disable=not show_progress(), leave=False)
+        bar.set_postfix_str(steps[0])
+        result = run_pipeline(scene, cfg, progress=show_progress(), log_training=writer.add_scalar if writer else None)
+        bar.update()
         metrics = summarize(scene, result, config_dict)
         if result.ground is not None:
             metrics["ground_plane"] = result.ground.as_dict()
         if cfg.output.maps:
+            bar.set_postfix_str("maps")
             pics = write_maps(scene, result, stage, member=cfg.output.member)
+            bar.update()
             if writer is not None:
                 for name, img in pics.items():
                     writer.add_image(f"maps/{name}", torch.from_numpy(img).permute(2, 0, 1), 0)
         if cfg.output.pointcloud:
+            bar.set_postfix_str("point clouds")
             metrics["pointcloud"] = write_point_clouds(
                 scene, result, stage, member=cfg.output.member, voxel_size=cfg.output.voxel_size,
                 render=cfg.output.render, render_backend=cfg.output.render_backend)
+        bar.close()
         if cfg.output.checkpoint and result.som is not None:
             result.som.save(stage / "som.safetensors")
         if writer is not None:
@@ -168,6 +180,12 @@ def main(dcfg: DictConfig) -> dict:
     from somtorch.atomic import exclusive_folder, exit_cleanly_on_sigterm
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    from experiments.cli import quiet
+
+    if quiet():  # the console shows warnings and errors only; run.log keeps everything
+        for h in logging.getLogger().handlers:
+            if isinstance(h, logging.StreamHandler) and not isinstance(h, logging.FileHandler):
+                h.setLevel(logging.WARNING)
     try:
         with one_line_errors(log):
             cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
