@@ -12,6 +12,8 @@ Formats (see ``../shared/data/README.md``):
   Freiburg header and divides by the scale magnitude).
 * ``.png`` 16-bit (KITTI, OAK-D): ``d = value / 256``, ``0`` = no disparity.
 * ``.npy`` / ``.npz``: a 2-D numeric array (key ``disparity``, ``disp`` or the only array).
+* ``.tif`` / ``.tiff``: a single-channel float (32/64-bit) map in pixels, as many stereo tools write
+  them (non-finite and negative values = no disparity); 16-bit integer TIFFs need ``scale``.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-DISPARITY_SUFFIXES: tuple[str, ...] = (".pfm", ".png", ".npy", ".npz")
+DISPARITY_SUFFIXES: tuple[str, ...] = (".pfm", ".png", ".npy", ".npz", ".tif", ".tiff")
 """File suffixes :func:`read_disparity` understands."""
 
 _NPZ_KEYS = ("disparity", "disp")
@@ -65,7 +67,7 @@ def read_disparity(
     PNG, where ``0`` codes "no disparity" — zero.
 
     Args:
-        path: ``.pfm``, ``.png`` (single channel), ``.npy`` or ``.npz`` file.
+        path: ``.pfm``, ``.png`` (single channel), ``.npy``, ``.npz`` or float ``.tif`` / ``.tiff`` file.
         scale: multiplier from stored values to pixels. Default: ``1/256`` for 16-bit PNG (KITTI,
             OAK-D), ``1`` otherwise. 8-bit PNG has no standard encoding and needs an explicit ``scale``.
         invalid_value: an extra stored value that codes "no disparity" (e.g. ``-1`` in some ``.npy``).
@@ -101,6 +103,8 @@ def read_disparity(
             scale = _PNG16_SCALE
     elif suffix == ".npy":
         raw = _load_npy(path)
+    elif suffix in (".tif", ".tiff"):
+        raw = _read_tiff_disparity(path, scale)
     else:
         raw = _load_npz(path)
     raw = _as_2d_numeric(path, raw)
@@ -113,6 +117,21 @@ def read_disparity(
         valid &= raw != invalid_value
     disparity = np.where(valid, values, 0.0).astype(np.float32)
     return torch.from_numpy(disparity), torch.from_numpy(valid)
+
+
+def _read_tiff_disparity(path: Path, scale: float | None) -> np.ndarray:
+    img = _imread(path)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    if img.ndim != 2:
+        raise DataFileError(path, f"a disparity TIFF must have one channel; got shape {img.shape}")
+    if img.size > MAX_PIXELS:
+        raise DataFileError(path, f"{img.shape[1]}x{img.shape[0]} px is above the limit of {MAX_PIXELS:,} "
+                                  "(SOMTORCH_MAX_PIXELS)")
+    if not np.issubdtype(img.dtype, np.floating) and scale is None:
+        raise DataFileError(path, f"an integer ({img.dtype}) TIFF has no standard disparity encoding; pass "
+                                  "scale= (stored value * scale = pixels)")
+    return img
 
 
 def _read_png_disparity(path: Path, scale: float | None) -> np.ndarray:

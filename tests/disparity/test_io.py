@@ -207,3 +207,22 @@ def test_read_mask_rejects_colour(tmp_path):
                                                     np.zeros((2, 2), np.uint8)]))
     with pytest.raises(DataFileError, match=r"m\.png.*one channel"):
         read_mask(tmp_path / "m.png")
+
+
+def test_float_tiff_disparity(tmp_path):
+    import cv2
+
+    from somtorch.disparity.io import read_disparity
+    from somtorch.validation import DataFileError
+
+    d = np.random.default_rng(0).uniform(0, 60, (20, 30)).astype(np.float32)
+    d[0, 0], d[1, 1], d[2, 2] = np.nan, -1.0, np.inf
+    assert cv2.imwrite(str(tmp_path / "d.tif"), d)
+    disp, valid = read_disparity(tmp_path / "d.tif")
+    assert not valid[0, 0] and not valid[1, 1] and not valid[2, 2] and int(valid.sum()) == d.size - 3
+    assert np.array_equal(disp.numpy()[valid.numpy()], d[valid.numpy()])
+    assert cv2.imwrite(str(tmp_path / "i.tiff"), (d.clip(0, 60) * 100).astype(np.uint16))
+    with pytest.raises(DataFileError, match="scale="):
+        read_disparity(tmp_path / "i.tiff")
+    disp, valid = read_disparity(tmp_path / "i.tiff", scale=0.01)
+    assert float(disp[5, 5]) == pytest.approx(float(d[5, 5]), abs=0.011)

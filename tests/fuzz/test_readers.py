@@ -45,6 +45,8 @@ def _seeds(tmp: Path) -> dict[str, Path]:
     files["png8"] = tmp / "s8.png"
     cv2.imwrite(str(tmp / "mask.png"), rng.integers(0, 3, (12, 16), dtype=np.uint8))
     files["mask"] = tmp / "mask.png"
+    cv2.imwrite(str(tmp / "s.tif"), d)
+    files["tiff"] = tmp / "s.tif"
     np.save(tmp / "s.npy", d)
     files["npy"] = tmp / "s.npy"
     np.savez_compressed(tmp / "s.npz", disparity=d)
@@ -116,6 +118,7 @@ READERS = {
     "png8": lambda p: read_image(p),
     "mask": lambda p: read_mask(p),
     "npy": lambda p: read_disparity(p),
+    "tiff": lambda p: read_disparity(p),
     "npz": lambda p: read_disparity(p),
     "calib": lambda p: read_middlebury_camera(p),
     "oakd": lambda p: _oakd_camera(p.parent, (12, 16)),
@@ -129,7 +132,7 @@ READERS = {
 
 def _check_result(kind: str, out) -> None:
     """A returned result must be sound."""
-    if kind in ("pfm", "png16", "npy", "npz"):
+    if kind in ("pfm", "png16", "npy", "npz", "tiff"):
         disp, valid = out
         assert disp.shape == valid.shape and disp.dtype == torch.float32 and valid.dtype == torch.bool
         assert bool(torch.isfinite(disp).all()) and bool((disp[valid] >= 0).all())
