@@ -19,6 +19,9 @@ if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
   fi
 fi
 
+# pip's notes about configured find-links folders that do not exist on this machine are noise
+quiet_pip() { grep -v -E "^WARNING: Location .* is ignored" || true; }
+
 # 2. Virtual environment.
 VPY=.venv/bin/python
 if [ ! -x "$VPY" ]; then
@@ -30,11 +33,11 @@ fi
 if ! $VPY -c 'import torch, sys; sys.exit(0 if torch.__version__.startswith("2.13.0") else 1)' 2>/dev/null; then
   echo "[setup] installing torch==2.13.0 (CPU)"
   if [ -n "${SOMTORCH_TORCH_INDEX:-}" ]; then
-    $VPY -m pip install -q "torch==2.13.0" --index-url "$SOMTORCH_TORCH_INDEX"
+    $VPY -m pip install -q "torch==2.13.0" --index-url "$SOMTORCH_TORCH_INDEX" 2>&1 | quiet_pip
   elif ls /opt/wheels/torch-2.13.0+cpu-*.whl >/dev/null 2>&1; then
-    $VPY -m pip install -q "torch==2.13.0" --find-links /opt/wheels
+    $VPY -m pip install -q "torch==2.13.0" --find-links /opt/wheels 2>&1 | quiet_pip
   else
-    $VPY -m pip install -q "torch==2.13.0" --index-url https://download.pytorch.org/whl/cpu
+    $VPY -m pip install -q "torch==2.13.0" --index-url https://download.pytorch.org/whl/cpu 2>&1 | quiet_pip
   fi
 fi
 
@@ -50,7 +53,7 @@ $VPY -m pip install -q -e ".[$EXTRA]" 2>&1 | grep -v -E "^WARNING: Location|is i
 if [ "$EXTRA" = "test" ]; then
   # the test oracle of somtorch.saliency_metrics; --no-deps: its metadata pins numpy < 2.3.5 and
   # scikit-image < 0.26, which it does not need (tests/test_saliency_metrics.py checks it works)
-  $VPY -m pip install -q --no-deps "pysodmetrics==1.6.2" || echo "[setup] WARNING: pysodmetrics not installed; its oracle test will skip" >&2
+  $VPY -m pip install -q --no-deps "pysodmetrics==1.6.2" 2>&1 | quiet_pip || echo "[setup] WARNING: pysodmetrics not installed; its oracle test will skip" >&2
 fi
 $VPY -c 'import somtorch, torch; print(f"[setup] ok: somtorch {somtorch.__version__}, torch {torch.__version__}")'
 echo "$WANT" > "$STAMP"
