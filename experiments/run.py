@@ -71,7 +71,12 @@ def load_input(cfg: RunConfig):
         raise ValueError("data.source is empty: give 'motorcycle', a scene folder or a disparity file")
     spec = d.source if d.source == "motorcycle" else to_absolute_path(d.source)
     disp = to_absolute_path(d.disparity_file) if d.disparity_file else None
-    scene = load_scene(spec, disparity_file=disp)
+    if d.frame is not None:
+        from somtorch.disparity.loading import load_kitti_frame
+
+        scene = load_kitti_frame(spec, d.frame, disparity=d.disparity_file or "disp_occ_0")
+    else:
+        scene = load_scene(spec, disparity_file=disp)
     if d.calibration is not None:
         scene.camera = read_calibration(to_absolute_path(d.calibration), (scene.height, scene.width))
     if d.name:  # one name in the log, metrics.json and the run folder (kitti2015, not devkit_demo)

@@ -65,6 +65,8 @@ class DataConfig:
     # or one calibration file: stereodemo JSON, Middlebury/ETH3D calib.txt or KITTI calib_cam_to_cam.txt
     # (replaces the folder's own camera for a scene or file too)
     calibration: Optional[str] = None
+    # the official KITTI 2015 layout: source = the training folder, frame = its number
+    frame: Optional[str] = None
 
 
 @dataclass

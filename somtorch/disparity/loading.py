@@ -204,3 +204,48 @@ def _require_some_valid(path: Path, valid: torch.Tensor) -> None:
         raise DataFileError(path, f"no valid disparity: all {valid.numel()} pixels are invalid "
                                   "(non-finite, negative, or the format's 'no value' code)")
 
+
+
+KITTI_DISPARITIES = ("disp_occ_0", "disp_noc_0", "disp_occ_1", "disp_noc_1")
+
+
+def load_kitti_frame(root: str | Path, frame: str | int, *, disparity: str = "disp_occ_0") -> Scene:
+    """A frame of the official KITTI 2015 layout, as its users have it::
+
+        training/image_2/000046_10.png      left colour image
+        training/disp_occ_0/000046_10.png   LiDAR disparity (uint16 / 256, 0 = none)
+        training/calib_cam_to_cam/000046.txt  (or a per-frame calib/000046.txt with P2 / P3)
+
+    ``root`` is the ``training`` (or ``testing``) folder; ``frame`` its number (46 or ``"000046"``);
+    ``disparity`` one of :data:`KITTI_DISPARITIES` (``disp_occ_0``: all pixels, ``disp_noc_0``:
+    non-occluded only). The camera comes from the frame's calibration file when there is one.
+
+    Raises:
+        FileNotFoundError: the root or the frame's disparity file does not exist.
+        DataFileError: a file cannot be read or the sizes disagree (naming the file).
+    """
+    from .camera import read_calibration
+
+    root = Path(root).expanduser()
+    if not root.is_dir():
+        raise FileNotFoundError(f"KITTI root not found: {root} (the 'training' folder of KITTI 2015)")
+    if disparity not in KITTI_DISPARITIES:
+        raise ValueError(f"disparity must be one of {KITTI_DISPARITIES}; got {disparity!r}")
+    name = f"{int(frame):06d}" if str(frame).isdigit() else str(frame)
+    disp_path = require_file(root / disparity / f"{name}_10.png", f"KITTI {disparity} file")
+    disp, valid = read_disparity(disp_path)
+    _require_some_valid(disp_path, valid)
+    hw = (int(disp.shape[0]), int(disp.shape[1]))
+    source = {"layout": "kitti2015", "disparity": str(disp_path)}
+    image = camera = None
+    img_path = root / "image_2" / f"{name}_10.png"
+    if img_path.is_file():
+        image = read_image(img_path)
+        _require_size(img_path, "image", (image.shape[1], image.shape[2]), hw, disp_path)
+        source["image"] = str(img_path)
+    for calib in (root / "calib_cam_to_cam" / f"{name}.txt", root / "calib" / f"{name}.txt"):
+        if calib.is_file():
+            camera = read_calibration(calib)
+            source["camera"] = str(calib)
+            break
+    return Scene(name=f"kitti_{name}", disparity=disp, valid=valid, image=image, camera=camera, source=source)

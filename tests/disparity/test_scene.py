@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -237,3 +238,50 @@ def test_camera_validation_and_depth():
         Camera(focal_px=1.0, cx=0, cy=0, baseline=1, baseline_unit="km")
     with pytest.raises(TypeError, match="floating-point"):
         cam.depth(torch.tensor([1, 2]))
+
+
+def _kitti_official(root):
+    import cv2
+
+    for sub in ("image_2", "disp_occ_0", "calib_cam_to_cam"):
+        (root / sub).mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    d = (rng.uniform(1, 60, (30, 80)) * 256).astype(np.uint16)
+    d[rng.random(d.shape) < 0.5] = 0
+    cv2.imwrite(str(root / "disp_occ_0" / "000046_10.png"), d)
+    cv2.imwrite(str(root / "image_2" / "000046_10.png"), rng.integers(0, 255, (30, 80, 3), dtype=np.uint8))
+    (root / "calib_cam_to_cam" / "000046.txt").write_text(
+        "P_rect_02: 7.215377e+02 0 6.095593e+02 4.485728e+01 0 7.215377e+02 1.728540e+02 2.163791e-01 0 0 1 0\n"
+        "P_rect_03: 7.215377e+02 0 6.095593e+02 -3.395242e+02 0 7.215377e+02 1.728540e+02 2.199936e+00 0 0 1 0\n")
+    return d
+
+
+def test_official_kitti_layout(tmp_path):
+    from somtorch.disparity.loading import load_kitti_frame
+
+    d = _kitti_official(tmp_path / "training")
+    scene = load_kitti_frame(tmp_path / "training", 46)
+    assert scene.name == "kitti_000046" and scene.image is not None and scene.camera is not None
+    assert scene.camera.baseline == pytest.approx(0.5327, abs=1e-3)
+    assert np.array_equal(scene.valid.numpy(), d > 0)
+    assert np.allclose(scene.disparity.numpy()[d > 0], d[d > 0] / 256.0)
+    with pytest.raises(FileNotFoundError, match="disp_occ_0"):
+        load_kitti_frame(tmp_path / "training", 47)
+    with pytest.raises(ValueError, match="disp_noc_0"):
+        load_kitti_frame(tmp_path / "training", 46, disparity="disp_x")
+
+
+def test_official_kitti_layout_from_the_command_line(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    _kitti_official(tmp_path / "training")
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.run([sys.executable, "-m", "experiments.run", "data=kitti2015_official",
+                           f"data.source={tmp_path / 'training'}", "data.frame=46", f"paths.output_dir={tmp_path / 'out'}",
+                           "output.pointcloud=false", "output.maps=false", "output.tensorboard=false"],
+                          cwd=root, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    runs = list((tmp_path / "out" / "run" / "kitti_46").glob("*/metrics.json"))
+    assert len(runs) == 1 and json.loads(runs[0].read_text())["scene"]["name"] == "kitti_46"

@@ -19,7 +19,8 @@ CONF = Path(__file__).resolve().parents[2] / "conf"
 SCHEMAS = {"features": FeatureConfig, "som": SOMConfig, "train": TrainConfig, "objects": AreaConfig,
            "reduction": ReductionConfig, "output": OutputConfig}
 # data configs whose mandatory ??? values must come from the command line, and values that fill them
-MANDATORY = {"file": ["data.source=/tmp/disp.pfm"], "stereo_pair": ["data.left=l.png", "data.right=r.png"]}
+MANDATORY = {"file": ["data.source=/tmp/disp.pfm"], "stereo_pair": ["data.left=l.png", "data.right=r.png"],
+             "kitti2015_official": ["data.source=/tmp/training", "data.frame=46"]}
 
 register()
 
