@@ -20,6 +20,47 @@ from typing import Any
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
+def field_types(schema: type, prefix: str = "") -> dict[str, Any]:
+    """``{dotted key: annotation}`` of every leaf field of a dataclass tree."""
+    out: dict[str, Any] = {}
+    hints = typing.get_type_hints(schema)
+    for f in dataclasses.fields(schema):
+        t = hints.get(f.name, Any)
+        if dataclasses.is_dataclass(t):
+            out.update(field_types(t, f"{prefix}{f.name}."))
+        else:
+            out[f"{prefix}{f.name}"] = t
+    return out
+
+
+def _value_error(key: str, value: str, t: Any) -> str | None:
+    """A one-line complaint when ``value`` cannot be a ``t`` (int / float / bool, optionally None)."""
+    import yaml
+
+    args = typing.get_args(t)
+    optional = type(None) in args
+    base = next((a for a in args if a is not type(None)), t) if args else t
+    if base not in (int, float, bool) or "(" in value or "[" in value:  # sweep functions, lists: Hydra's
+        return None
+    for part in value.split(","):  # a sweep lists several values
+        part = part.strip()
+        if not part or part.startswith(("range(", "choice(", "interval(", "${", "glob(")):
+            continue
+        try:
+            v = yaml.safe_load(part)
+        except yaml.YAMLError:
+            v = part
+        if v is None and optional:
+            continue
+        ok = (isinstance(v, bool) if base is bool else
+              isinstance(v, int) and not isinstance(v, bool) if base is int else
+              isinstance(v, (int, float)) and not isinstance(v, bool))
+        if not ok:
+            return f"{key}={part}: expected {'a' if base is not int else 'an'} {base.__name__}" + (
+                " or null" if optional else "")
+    return None
+
+
 def schema_keys(schema: type, prefix: str = "") -> tuple[set[str], set[str]]:
     """``(keys, open_keys)``: every dotted field path of a dataclass tree, and the paths of fields
     that take free sub-keys (dicts, ``Any``)."""
@@ -58,6 +99,7 @@ def _hint(word: str, known: list[str]) -> str:
 def check_overrides(argv: list[str], schema: type) -> str | None:
     """The error line for the first unknown key or group option in ``argv``, or None."""
     keys, open_keys = schema_keys(schema)
+    types = field_types(schema)
     groups = config_groups()
     for arg in argv:
         if arg.startswith("-") or "=" not in arg or arg[0] in "+~":
@@ -72,6 +114,9 @@ def check_overrides(argv: list[str], schema: type) -> str | None:
                     return f"{key}={opt}: no option {opt!r} in conf/{key}/; {_hint(opt, groups[key])}"
             continue
         if key in keys or any(key.startswith(o + ".") for o in open_keys):
+            bad = _value_error(key, value, types.get(key, Any))
+            if bad:
+                return bad
             continue
         return (f"unknown config key {key!r}: {_hint(key, sorted(keys | set(groups)))} "
                 "(--cfg job prints every key)")

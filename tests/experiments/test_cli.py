@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -54,7 +55,7 @@ def test_every_composed_key_is_known(name, schema):
             if isinstance(v, dict) and v:
                 walk(v, f"{prefix}{k}.")
             else:
-                flat.append(f"{prefix}{k}={v if not isinstance(v, (list, dict)) else 0}")
+                flat.append(f"{prefix}{k}={json.dumps(v) if not isinstance(v, (list, dict)) else 0}")
 
     walk(OmegaConf.to_container(cfg, resolve=False))
     assert check_overrides(flat, schema) is None
@@ -83,3 +84,20 @@ def test_help_does_not_import_torch():  # what makes it instant (0.17 s here aga
     code = "import sys; from experiments.help import help_text; help_text('run'); print('torch' in sys.modules)"
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert proc.stdout.strip() == "False", proc.stderr
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["train.epochs=abc"], "train.epochs=abc: expected an int"),
+    (["objects.similarity=x"], "expected a float"),
+    (["objects.drop_specks=maybe"], "expected a bool"),
+    (["ensemble=2.5"], "ensemble=2.5: expected an int"),
+    (["train.epochs=3,abc"], "train.epochs=abc"),  # each value of a sweep
+])
+def test_values_of_the_wrong_type_are_named(args, expect):
+    err = check_overrides(args, RunConfig)
+    assert err is not None and expect in err
+
+
+def test_values_of_the_right_type_pass():
+    assert check_overrides(["train.sigma=null", "train.sigma=2", "objects.similarity=1", "object_id=null",
+                            "objects.drop_specks=false", "train.epochs=range(1,4)"], RunConfig) is None
