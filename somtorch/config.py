@@ -370,8 +370,10 @@ class WarmStartConfig(Validated):
 @dataclass
 class PipelineConfig(Validated):
     """The whole pipeline: ``method`` (segmenter of step 1b, see :data:`somtorch.segmenters.SEGMENTERS`),
-    its groups, ``ensemble`` members (seeds ``seed … seed + ensemble − 1``) and the scored
-    ``object_id`` (None = the scene's main object(s))."""
+    its groups, ``ensemble`` members (seeds ``seed … seed + ensemble − 1``), the scored
+    ``object_id`` (None = the scene's main object(s)) and the torch ``device`` the SOM trains and
+    labels the pixels on (``"cpu"``, ``"cuda"``, ``"cuda:1"``, ``"mps"``; the object step runs on
+    the CPU)."""
 
     _constraints: ClassVar[dict[str, Any]] = {
         "method": Choice("somtorch.segmenters:METHODS"), "ensemble": POSITIVE_INT,
@@ -389,6 +391,7 @@ class PipelineConfig(Validated):
     ensemble: int = 1
     seed: int = 0
     object_id: int | None = None
+    device: str = "cpu"
 
     @property
     def runs(self) -> int:

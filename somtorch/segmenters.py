@@ -87,25 +87,43 @@ def _from_prototypes(weight: torch.Tensor, feats: Features, grid_d2: torch.Tenso
     return Segmentation(None, units[..., 2], grid_d2, weight, som, seeds, ref_c)  # type: ignore[arg-type]
 
 
-def _new_som(cfg: PipelineConfig, runs: int, dim: int) -> SOM:
-    return SOM.from_config(cfg.som, dim, ensemble=runs, seed=cfg.seed)
+def _new_som(cfg: PipelineConfig, runs: int, dim: int, device: str = "cpu") -> SOM:
+    return SOM.from_config(cfg.som, dim, ensemble=runs, seed=cfg.seed, device=device)
+
+
+def resolve_device(name: str) -> torch.device:
+    """``PipelineConfig.device`` as a :class:`torch.device`, checked to exist on this machine."""
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, TypeError) as e:
+        raise ValueError(f"device={name!r} is not a torch device ({e}); use 'cpu', 'cuda', 'cuda:1' or 'mps'") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device={name!r} but torch.cuda.is_available() is False on this machine (CPU build of "
+                         "torch, or no GPU): use device=cpu")
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise ValueError(f"device={name!r} but this machine has {torch.cuda.device_count()} CUDA device(s)")
+    if dev.type == "mps" and not (getattr(torch.backends, "mps", None) and torch.backends.mps.is_available()):
+        raise ValueError(f"device={name!r} but MPS is not available here: use device=cpu")
+    return dev
 
 
 @register("som", has_grid=True)
 def _som(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg: PipelineConfig, runs: int,
          progress: bool, log_training: Callable[[str, float, int], Any] | None) -> Segmentation:
-    som, tc = _new_som(cfg, runs, train.x.shape[-1]), cfg.train
+    dev = resolve_device(cfg.device)
+    som, tc = _new_som(cfg, runs, train.x.shape[-1], str(dev)), cfg.train
+    x = train.x.to(dev)
     callback = None
     if log_training is not None:
         def callback(info: StepInfo) -> None:
             step = round(info.epoch)
-            log_training("train/quantization_error", float(som.quantization_error(train.x).mean()), step)
-            log_training("train/topographic_error", float(som.topographic_error(train.x).mean()), step)
+            log_training("train/quantization_error", float(som.quantization_error(x).mean()), step)
+            log_training("train/topographic_error", float(som.topographic_error(x).mean()), step)
             log_training("train/sigma", float(info.sigma.mean()), step)
     if tc.parallel != "none":
         som = _fit_parallel(som, train, cfg)
     else:
-        som.fit(train.x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
+        som.fit(x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
                 sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, order=tc.order,
                 batch_size=tc.batch_size, init=cfg.som.init, progress=progress, callback=callback)
     return _from_prototypes(som.weight.detach(), feats, som.grid_d2, som, som.seeds)
@@ -200,5 +218,13 @@ def run_segmenter(feats: Features, train: Features, scene: Any, usable: torch.Te
         out = seg.fn(feats, train, scene, usable, cfg, cfg.runs, progress, log_training)
     with timer("segment"):
         if out.labels is None:
-            out.labels = segment(out.prototypes, feats.x, feats.pixels, feats.shape)  # (E, H, W)
+            dev = out.prototypes.device  # label where the map was trained (a GPU for device=cuda)
+            out.labels = segment(out.prototypes, feats.x.to(dev), feats.pixels.to(dev), feats.shape)  # (E, H, W)
+        if out.labels.device.type != "cpu":  # the object step and the outputs work on the CPU
+            out.labels, out.ref_disparity = out.labels.cpu(), out.ref_disparity.cpu()
+            out.prototypes = out.prototypes.cpu() if out.prototypes is not None else None
+            out.grid_d2 = out.grid_d2.cpu() if out.grid_d2 is not None else None
+            out.ref_color = out.ref_color.cpu() if out.ref_color is not None else None
+            if out.som is not None:
+                out.som.to("cpu")
     return out

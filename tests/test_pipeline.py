@@ -204,3 +204,33 @@ def test_a_map_without_a_convincing_object_keeps_everything_flags_it_and_warns(c
     assert all(m.no_object for m in res.members)
     assert all(m.reduction.reduction_union == 0.0 for m in res.members)  # the whole map is kept
     assert "no convincing object area" in caplog.text and "3 of 3" in caplog.text
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
+    not torch.cuda.is_available(), reason="no CUDA device on this machine"))])
+def test_device_flows_through_the_pipeline(device):
+    from somtorch.config import PipelineConfig, with_overrides
+    from somtorch.disparity.scene import load_scene
+    from somtorch.pipeline import run_pipeline
+
+    scene = load_scene("motorcycle")
+    ref = run_pipeline(scene, with_overrides(PipelineConfig(), {"ensemble": 2}), metrics=False)
+    got = run_pipeline(scene, with_overrides(PipelineConfig(), {"ensemble": 2, "device": device}), metrics=True)
+    assert got.labels.device.type == "cpu" and got.som.weight.device.type == "cpu"
+    assert all(m.kept for m in got.members)
+    if device == "cpu":  # the default path, bitwise
+        assert torch.equal(got.labels, ref.labels)
+        assert [[a.box for a in m.kept] for m in got.members] == [[a.box for a in m.kept] for m in ref.members]
+
+
+def test_an_unavailable_device_is_refused_before_training():
+    from somtorch.config import PipelineConfig, with_overrides
+    from somtorch.disparity.scene import load_scene
+    from somtorch.pipeline import run_pipeline
+
+    scene = load_scene("motorcycle")
+    with pytest.raises(ValueError, match="not a torch device"):
+        run_pipeline(scene, with_overrides(PipelineConfig(), {"device": "gpu0"}))
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="cuda.is_available"):
+            run_pipeline(scene, with_overrides(PipelineConfig(), {"device": "cuda"}))
