@@ -183,8 +183,8 @@ def test_hostile_npz(tmp_path, arrays, problem):
 
 
 def test_unknown_suffix_and_missing_file(tmp_path):
-    with pytest.raises(ValueError, match=r"\.tiff.*\.pfm, \.png, \.npy, \.npz"):
-        read_disparity(tmp_path / "d.tiff")
+    with pytest.raises(ValueError, match=r"\.exr.*\.pfm, \.png, \.npy, \.npz, \.tif, \.tiff"):
+        read_disparity(tmp_path / "d.exr")
     with pytest.raises(FileNotFoundError, match=r"nothere\.pfm"):
         read_disparity(tmp_path / "nothere.pfm")
     with pytest.raises(ValueError, match="scale"):
