@@ -76,7 +76,7 @@ def load_input(cfg: RunConfig):
 
         scene = load_kitti_frame(spec, d.frame, disparity=d.disparity_file or "disp_occ_0")
     else:
-        scene = load_scene(spec, disparity_file=disp)
+        scene = load_scene(spec, disparity_file=disp, disparity_scale=d.disparity_scale)
     if d.calibration is not None:
         scene.camera = read_calibration(to_absolute_path(d.calibration), (scene.height, scene.width))
     if d.name:  # one name in the log, metrics.json and the run folder (kitti2015, not devkit_demo)

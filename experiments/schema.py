@@ -50,6 +50,7 @@ class DataConfig:
 
     source: Optional[str] = MISSING
     disparity_file: Optional[str] = None
+    disparity_scale: Optional[float] = None  # stored value x scale = px (e.g. 0.25: Middlebury 2003 disp2.png)
     left: Optional[str] = MISSING
     right: Optional[str] = MISSING
     sgbm: SGBMConfig = field(default_factory=SGBMConfig)  # type: ignore[valid-type]

@@ -53,7 +53,8 @@ _MOTORCYCLE_FULL = Camera(focal_px=3979.911, cx=1244.772, cy=1019.507, baseline=
                           doffs=124.343)
 
 
-def load_scene(spec: str | Path, *, disparity_file: str | Path | None = None) -> Scene:
+def load_scene(spec: str | Path, *, disparity_file: str | Path | None = None,
+               disparity_scale: float | None = None) -> Scene:
     """Load a scene from an embedded name, a data-set folder or a single disparity file.
 
     ``spec`` is one of:
@@ -78,7 +79,9 @@ def load_scene(spec: str | Path, *, disparity_file: str | Path | None = None) ->
 
       plus ``objects.png`` + ``objects.json`` when present (:class:`ObjectInfo` from the json's
       ``objects`` list). ``disparity_file`` (relative to the folder, or absolute) overrides the
-      disparity, e.g. ``"disp_est.png"`` for the KITTI estimate.
+      disparity, e.g. ``"disp_est.png"`` for the KITTI estimate, and ``disparity_scale`` its
+      encoding (stored value × scale = px), e.g. ``0.25`` for the 8-bit ``disp2.png`` of the
+      Middlebury 2003 scenes (``1/8`` for 2001, ``1`` for the third-size 2005/2006 ``disp1.png``).
     * a ``.pfm``/``.png``/``.npy``/``.npz`` file: disparity only, no image or camera.
 
     Raises:
@@ -100,10 +103,10 @@ def load_scene(spec: str | Path, *, disparity_file: str | Path | None = None) ->
                                 f"{'/'.join(DISPARITY_SUFFIXES)} file, or an embedded scene name "
                                 f"{list(EMBEDDED_SCENES)})")
     if path.is_dir():
-        return _load_folder(path, disparity_file)
+        return _load_folder(path, disparity_file, disparity_scale)
     if disparity_file is not None:
         raise ValueError(f"disparity_file applies to folders; {path} is a file")
-    disparity, valid = read_disparity(path)
+    disparity, valid = read_disparity(path, scale=disparity_scale)
     _require_some_valid(path, valid)
     return Scene(name=path.stem, disparity=disparity, valid=valid,
                  source={"layout": "file", "disparity": str(path)})
@@ -136,9 +139,9 @@ def _detect_layout(folder: Path, disparity_file: str | Path | None) -> tuple[_La
     return layout, found
 
 
-def _load_folder(folder: Path, disparity_file: str | Path | None) -> Scene:
+def _load_folder(folder: Path, disparity_file: str | Path | None, disparity_scale: float | None = None) -> Scene:
     layout, disp_path = _detect_layout(folder, disparity_file)
-    disparity, valid = read_disparity(disp_path)
+    disparity, valid = read_disparity(disp_path, scale=disparity_scale)
     _require_some_valid(disp_path, valid)
     hw = (disparity.shape[0], disparity.shape[1])
     source = {"layout": layout.name if layout else "disparity_only", "disparity": str(disp_path)}

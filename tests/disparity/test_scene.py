@@ -285,3 +285,18 @@ def test_official_kitti_layout_from_the_command_line(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     runs = list((tmp_path / "out" / "run" / "kitti_46").glob("*/metrics.json"))
     assert len(runs) == 1 and json.loads(runs[0].read_text())["scene"]["name"] == "kitti_46"
+
+
+def test_an_old_middlebury_folder_with_an_8bit_disparity_and_its_scale(tmp_path):
+    """Middlebury 2003 style: im2.png + disp2.png (8-bit, 4 x the disparity, 0 = unknown)."""
+    rng = np.random.default_rng(0)
+    d8 = rng.integers(1, 255, (20, 30), dtype=np.uint8)
+    d8[0, :5] = 0
+    cv2.imwrite(str(tmp_path / "disp2.png"), d8)
+    with pytest.raises(Exception, match="scale"):  # 8-bit PNG has no standard encoding
+        load_scene(tmp_path / "disp2.png")
+    scene = load_scene(tmp_path / "disp2.png", disparity_scale=0.25)
+    assert np.allclose(scene.disparity.numpy()[scene.valid.numpy()], d8[d8 > 0] / 4.0)
+    assert int((~scene.valid).sum()) == 5
+    folder = load_scene(tmp_path, disparity_file="disp2.png", disparity_scale=0.25)
+    assert torch.equal(folder.disparity, scene.disparity)
