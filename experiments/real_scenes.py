@@ -27,8 +27,6 @@ against the union of the labelled objects, :mod:`somtorch.saliency_metrics`), me
 
 from __future__ import annotations
 
-import sys
-
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
     from experiments.help import maybe_print_help
 

@@ -14,8 +14,6 @@ Examples::
 
 from __future__ import annotations
 
-import sys
-
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
     from experiments.help import maybe_print_help
 

@@ -22,8 +22,6 @@ same command skips every job whose ``metrics.json`` is complete and was made by 
 
 from __future__ import annotations
 
-import sys
-
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
     from experiments.help import maybe_print_help
 

@@ -24,8 +24,6 @@ and ``validate.md`` into the Hydra run folder.
 
 from __future__ import annotations
 
-import sys
-
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
     from experiments.help import maybe_print_help
 

@@ -14,8 +14,6 @@ stage timings; the frames per second; useful hits where scored) into the Hydra r
 
 from __future__ import annotations
 
-import sys
-
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
     from experiments.help import maybe_print_help
 
