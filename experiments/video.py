@@ -33,10 +33,11 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
+from experiments.cli import CONF
 from experiments.schema import RunConfig, register
 from somtorch.config import WarmStartConfig
 
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = str(CONF)
 SCHEMA = "somtorch.video/1"
 log = logging.getLogger("somtorch.video")
 

@@ -104,9 +104,13 @@ def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
                                                     "0 should mean 'invalid' and does not in this format)" if lo == 0 else ""))
 
 
-def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None
+def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
+            ground_fn: Callable[[torch.Tensor], GroundPlane | None] | None = None
             ) -> tuple[torch.Tensor, GroundPlane | None, torch.Tensor, Features, Features]:
     """Stages clean, ground and features: ``(valid, ground, usable, features, training features)``.
+
+    ``ground_fn(valid)``: where the ground plane comes from instead of a fit (a video re-uses the
+    previous frame's plane).
 
     Raises:
         ValueError: before any work, for a map no segmentation can use: fewer valid pixels than
@@ -118,7 +122,7 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None
     with timer("clean"):
         valid = remove_speckles(scene.disparity, scene.valid, max_size_frac=cfg.features.speckle_frac)
     with timer("ground"):
-        ground = fit_ground_plane(scene.disparity, valid, cfg.ground)
+        ground = ground_fn(valid) if ground_fn is not None else fit_ground_plane(scene.disparity, valid, cfg.ground)
     with timer("features"):
         usable = valid if ground is None else valid & ~ground.mask
         f = cfg.features

@@ -18,7 +18,6 @@ experiment (a synthetic camera motion over a real scene when no sequence is give
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
@@ -26,10 +25,9 @@ import torch
 
 from .config import PipelineConfig, WarmStartConfig
 from .core import SOM
-from .disparity.features import make_features
 from .disparity.scene import Scene
-from .pipeline import MemberResult, detect
-from .segmenters import Segmentation, _from_prototypes
+from .pipeline import MemberResult, _Timer, detect, prepare
+from .segmenters import Segmentation, _from_prototypes, run_segmenter
 from .tasks.ground import GroundPlane, fit_ground_plane
 from .tasks.segmentation import segment
 
@@ -98,44 +96,32 @@ class SequenceRunner:
         return g, False
 
     def step(self, scene: Scene) -> FrameResult:
-        """Run one frame."""
-        cfg, t = self.cfg, {}
-        t0 = time.perf_counter()
-        valid = scene.valid
-        if cfg.features.speckle_frac > 0:
-            from .disparity.filters import remove_speckles
+        """Run one frame (the pipeline's own stages; only training starts from the last frame)."""
+        cfg, timer, reused = self.cfg, _Timer(), [False]
 
-            valid = remove_speckles(scene.disparity, valid, max_size_frac=cfg.features.speckle_frac)
-        ground, reused = self._ground_for(scene, valid)
-        t["ground"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        usable = valid if ground is None else valid & ~ground.mask
-        f = cfg.features
-        feats = make_features(scene.disparity, usable, normalize=f.normalize, d_weight=f.d_weight,
-                              image=scene.image if f.color_weight > 0 else None, color_weight=f.color_weight)
-        train = feats.subsample(f.train_stride)
-        t["features"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        tc = cfg.train
+        def ground_fn(valid: torch.Tensor) -> GroundPlane | None:
+            g, reused[0] = self._ground_for(scene, valid)
+            return g
+
+        valid, ground, usable, feats, train = prepare(scene, cfg, timer, ground_fn=ground_fn)
         warm = self.warm and self.som is not None and self.som.dim == train.x.shape[-1]
         if warm:
-            self.som.fit(train.x, mode="batch", epochs=self.warm_epochs, sigma=self.warm_sigma,
-                         sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, progress=False)
-        else:
-            self.som = SOM.from_config(cfg.som, train.x.shape[-1], ensemble=cfg.runs, seed=cfg.seed)
-            self.som.fit(train.x, mode=tc.mode, epochs=tc.epochs, lr=tc.lr, sigma=tc.sigma, lr_decay=tc.lr_decay,
-                         sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, order=tc.order,
-                         batch_size=tc.batch_size, init=cfg.som.init, progress=False)
-        t["train"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        w = self.som.weight.detach()
-        seg: Segmentation = _from_prototypes(w, feats, self.som.grid_d2, self.som, self.som.seeds)
-        seg.labels = segment(w, feats.x, feats.pixels, feats.shape)
-        t["segment"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        members = detect(scene, seg, ground, cfg)
-        t["objects"] = time.perf_counter() - t0
-        out = FrameResult(self._index, members, warm, reused, ground, t)
+            tc = cfg.train
+            with timer("train"):
+                self.som.fit(train.x, mode="batch", epochs=self.warm_epochs, sigma=self.warm_sigma,
+                             sigma_decay=tc.sigma_decay, neighborhood=tc.neighborhood, progress=False)
+            w = self.som.weight.detach()
+            seg: Segmentation = _from_prototypes(w, feats, self.som.grid_d2, self.som, self.som.seeds)
+            with timer("segment"):
+                seg.labels = segment(w, feats.x, feats.pixels, feats.shape)
+        else:  # cold: exactly run_pipeline's segmenter
+            seg = run_segmenter(feats, train, scene, usable, cfg, timer=timer)
+            self.som = seg.som
+        members = detect(scene, seg, ground, cfg, timer)
+        t = dict(timer.t)
+        t["ground"] = t.pop("clean", 0.0) + t.get("ground", 0.0)  # cleaning is part of the ground stage here
+        t["objects"] = t.get("objects", 0.0) + t.pop("reduction", 0.0)
+        out = FrameResult(self._index, members, warm, reused[0], ground, t)
         self._index += 1
         return out
 
