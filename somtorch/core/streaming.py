@@ -26,7 +26,7 @@ from ..config import TrainConfig
 from .decay import DECAYS
 from .grid import default_sigma
 from .neighborhood import NEIGHBORHOODS
-from .training import Schedules, _member_schedule, accumulate, batch_target
+from .training import _member_schedule, accumulate, batch_target
 
 __all__ = ["Source", "chunk_rows", "fit_batch_chunked"]
 
@@ -126,12 +126,12 @@ def fit_batch_chunked(som: Any, sources: Source | Sequence[Source], *, epochs: i
         raise ValueError(f"sigma_decay {sigma_decay!r}: choose from {sorted(DECAYS)}")
     if neighborhood not in NEIGHBORHOODS:
         raise ValueError(f"neighborhood {neighborhood!r}: choose from {sorted(NEIGHBORHOODS)}")
-    sched = Schedules(p0, p0, [DECAYS[sigma_decay]] * ens, p0, p1, [DECAYS[sigma_decay]] * ens)
+    decay = [DECAYS[sigma_decay]] * ens
     nb = NEIGHBORHOODS[neighborhood]
     grid_d2 = som.grid_d2.double()
     with torch.no_grad():
         for ep in range(epochs):
-            sig = _member_schedule(sched.sigma_decay, sched.sigma, sched.sigma_final, ep, ep + 1, epochs)[0]
+            sig = _member_schedule(decay, p0, p1, ep, ep + 1, epochs)[0]  # the radius of SOM.fit's batch map
             sums, counts, seen = epoch_sums(w, sources, chunk_size)
             if all_reduce is not None:
                 all_reduce(sums)
