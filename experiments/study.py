@@ -130,8 +130,15 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
         shutil.rmtree(stale, ignore_errors=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     try:
+        from tqdm.auto import tqdm
+
+        from experiments.cli import show_progress
+
         repeats: list[dict[str, float]] = []
         results, per_run_s = [], None
+        per_rep = 1 if cfg.execution == "ensemble" or cfg.runs == 1 else cfg.runs
+        bar = tqdm(total=cfg.repeats * per_rep, desc=f"{scene.name} runs", unit="run", leave=False,
+                   disable=not show_progress())  # updated between timed runs only
         if cfg.repeats > 1:  # timing study: one untimed warm-up (kernel compile/load, allocator, caches)
             run_pipeline(scene, dataclasses.replace(cfg, ensemble=1), metrics=False)
         for rep in range(cfg.repeats):
@@ -139,6 +146,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
             if cfg.execution == "ensemble" or cfg.runs == 1:
                 res = [run_pipeline(scene, cfg, metrics=True)]
                 times = None
+                bar.update()
             else:
                 res, times = [], []
                 for e in range(cfg.runs):
@@ -146,6 +154,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
                     solo = dataclasses.replace(cfg, ensemble=1, seed=cfg.seed + e)
                     res.append(run_pipeline(scene, solo, metrics=True))
                     times.append(time.perf_counter() - te)
+                    bar.update()
             wall = time.perf_counter() - t0
             stages: dict[str, float] = {}
             for r in res:
@@ -154,6 +163,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
             repeats.append({**stages, "wall": wall})
             if rep == 0:
                 results, per_run_s = res, times
+        bar.close()
         runs = merge_runs([run_records(scene, r, obj_mask, None if per_run_s is None else per_run_s[i:i + 1])
                             for i, r in enumerate(results)])
         first = results[0].members[0].score
