@@ -149,3 +149,45 @@ def quiet() -> bool:
 def show_progress() -> bool:
     """Progress bars only for a person watching: a terminal on stderr and no ``--quiet``."""
     return not quiet() and sys.stderr.isatty()
+
+
+def launcher_jobs() -> int:
+    """Jobs a Hydra launcher runs side by side on this machine (1 outside a multirun).
+
+    The joblib launcher's ``n_jobs`` (negative counts as joblib does: -1 = every core); other
+    launchers start one job per task with its own CPUs (SLURM, Ray set the affinity or
+    ``OMP_NUM_THREADS``), so they count as 1. Under ``torchrun`` the local ranks share the node.
+    """
+    import os
+
+    from somtorch.core.threads import available_cores
+
+    local = os.environ.get("LOCAL_WORLD_SIZE")
+    if local and local.isdigit() and int(local) > 0:
+        return int(local)
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        from hydra.types import RunMode
+
+        hc = HydraConfig.get()
+    except (ImportError, ValueError):
+        return 1
+    if hc.mode != RunMode.MULTIRUN:
+        return 1
+    n = hc.launcher.get("n_jobs") if hc.launcher is not None else None
+    if n is None:
+        return 1
+    n = int(n)
+    return max(1, available_cores() + 1 + n if n < 0 else n)
+
+
+def configure_threads() -> int:
+    """Set torch's threads for this job from the cores free to it (``somtorch.core.threads``)."""
+    import logging
+
+    from somtorch.core.threads import configure
+
+    jobs = launcher_jobs()
+    n = configure(jobs=jobs)
+    logging.getLogger("somtorch").debug("CPU threads: %d (launcher jobs side by side: %d)", n, jobs)
+    return n

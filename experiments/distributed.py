@@ -50,6 +50,9 @@ def main(argv: list[str] | None = None) -> int:
 
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s][rank %(rank)s][%(levelname)s] %(message)s")
     _from_slurm(os.environ)
+    from experiments.cli import configure_threads
+
+    configure_threads()  # the local ranks share the node's cores
     rank_env = os.environ.get("RANK")
     old = logging.getLogRecordFactory()
 

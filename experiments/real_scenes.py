@@ -232,6 +232,9 @@ def to_markdown(results: dict[str, Any]) -> str:
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="real_scenes")
 def main(dcfg: DictConfig) -> dict:
+    from experiments.cli import configure_threads
+
+    configure_threads()
     from experiments.schema import one_line_errors
     from somtorch.atomic import write_staged
 

@@ -179,6 +179,9 @@ def _log_hparams(writer, cfg: RunConfig, metrics: dict) -> None:
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="run")
 def main(dcfg: DictConfig) -> dict:
     """Hydra entry point."""
+    from experiments.cli import configure_threads
+
+    configure_threads()
     from experiments.schema import one_line_errors
     from somtorch.atomic import exclusive_folder, exit_cleanly_on_sigterm
 

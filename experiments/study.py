@@ -252,6 +252,9 @@ def _write_tensorboard(writer, cfg: StudyConfig, metrics: dict[str, Any]) -> Non
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="study")
 def main(dcfg: DictConfig) -> float:
     """Hydra entry point; returns the job's objective (``summary.tradeoff``; 0 without an object mask)."""
+    from experiments.cli import configure_threads
+
+    configure_threads()
     cfg: StudyConfig = OmegaConf.to_object(dcfg)
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     exit_cleanly_on_sigterm()

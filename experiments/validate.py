@@ -267,6 +267,9 @@ ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="validate")
 def main(dcfg: DictConfig) -> int:
+    from experiments.cli import configure_threads
+
+    configure_threads()
     from experiments.schema import one_line_errors
     from somtorch.atomic import write_staged
 

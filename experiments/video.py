@@ -87,6 +87,9 @@ def frames_of(cfg: VideoConfig):
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="video")
 def main(dcfg: DictConfig) -> dict:
+    from experiments.cli import configure_threads
+
+    configure_threads()
     from experiments.schema import one_line_errors
     from somtorch.atomic import write_staged
     from somtorch.video import SequenceRunner

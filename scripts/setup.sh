@@ -55,5 +55,14 @@ if [ "$EXTRA" = "test" ]; then
   # scikit-image < 0.26, which it does not need (tests/test_saliency_metrics.py checks it works)
   $VPY -m pip install -q --no-deps "pysodmetrics==1.6.2" 2>&1 | quiet_pip || echo "[setup] WARNING: pysodmetrics not installed; its oracle test will skip" >&2
 fi
+if [[ ",$EXTRA," == *",bench,"* ]]; then
+  # benchmark-only peers that pip cannot resolve on its own (benchmarks/README.md): fastersom 0.6.0
+  # declares Python >= 3.12 but is pure Python; somoclu's sdist needs numpy at build time and must
+  # not try its CUDA build
+  $VPY -m pip install -q --no-deps --ignore-requires-python "fastersom==0.6.0" 2>&1 | quiet_pip \
+    || echo "[setup] WARNING: fastersom not installed; bench_core.py reports it missing" >&2
+  CUDAHOME=/nonexistent $VPY -m pip install -q --no-build-isolation --no-deps "somoclu==1.7.6" 2>&1 | quiet_pip \
+    || echo "[setup] WARNING: somoclu not built; bench_core.py reports it missing" >&2
+fi
 $VPY -c 'import somtorch, torch; print(f"[setup] ok: somtorch {somtorch.__version__}, torch {torch.__version__}")'
 echo "$WANT" > "$STAMP"

@@ -37,6 +37,8 @@ from pathlib import Path
 
 import torch
 
+from .threads import kernel_threads
+
 try:
     import fcntl
 except ImportError:  # Windows: no lock; the atomic rename alone keeps concurrent builds correct
@@ -47,7 +49,7 @@ logger = logging.getLogger(__name__)
 ENV_SWITCH = "SOMTORCH_NATIVE"  # "0" disables the native kernel
 ENV_CACHE = "SOMTORCH_CACHE_DIR"
 SOURCE = Path(__file__).resolve().parent / "csrc" / "bmu.cpp"
-ABI = 2  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
+ABI = 3  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
 BASE_FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off")
 BUILD_TIMEOUT_S = 300
 
@@ -165,6 +167,10 @@ def _load() -> ctypes.CDLL:
         # x, x_stride, w, E, N, K, D, sums, counts, nthreads
         fn.argtypes = [p, i64, p, i64, i64, i64, i64, p, p, i32]
         fn.restype = ctypes.c_int
+    for fn in (lib.somtorch_online_f32, lib.somtorch_online_f64):
+        # w, xs, xs_stride, coef, log_lr, grid_d2, E, S, K, D, nthreads
+        fn.argtypes = [p, p, i64, p, p, p, i64, i64, i64, i64, i32]
+        fn.restype = ctypes.c_int
     return lib
 
 
@@ -247,7 +253,7 @@ def native_bmu(x: torch.Tensor, weight: torch.Tensor, k: int = 1) -> torch.Tenso
     out = torch.empty((e, n) if k == 1 else (e, n, 2), dtype=torch.long)
     fn = lib.somtorch_bmu_f32 if x.dtype == torch.float32 else lib.somtorch_bmu_f64
     rc = fn(xc.data_ptr(), 0 if x.ndim == 2 else n * d, wc.data_ptr(), e, n, kk, d, k, out.data_ptr(),
-            torch.get_num_threads())
+            kernel_threads())
     if rc != 0:
         _note(_refusal(rc, e, n, kk, d))
         return None
@@ -274,8 +280,48 @@ def native_accumulate(x: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tens
     counts = torch.zeros(e, kk, dtype=torch.long)
     fn = lib.somtorch_accumulate_f32 if x.dtype == torch.float32 else lib.somtorch_accumulate_f64
     rc = fn(xc.data_ptr(), 0 if x.ndim == 2 else n * d, wc.data_ptr(), e, n, kk, d, sums.data_ptr(),
-            counts.data_ptr(), torch.get_num_threads())
+            counts.data_ptr(), kernel_threads())
     if rc != 0:
         _note(_refusal(rc, e, n, kk, d))
         return None
     return sums, counts.to(weight.dtype)
+
+
+@torch.no_grad()
+def native_online(weight: torch.Tensor, xs: torch.Tensor, coef: torch.Tensor, log_lr: torch.Tensor,
+                  grid_d2: torch.Tensor) -> bool:
+    """Gaussian online rule for S steps, in place on ``weight``; False (nothing done) if unsupported.
+
+    The kernel runs :func:`somtorch.core.training.online_block`'s operations in the same precision
+    and order, one compiled loop per member (threads take whole members, so member e equals its
+    solo map bitwise); the exponential is the C library's, so the weights agree with the torch
+    path to rounding.
+
+    Shape:
+        ``weight`` ``(E, K, D)`` contiguous; ``xs`` ``(1 | E, S, D)``; ``coef`` = −1/(2σ²) and
+        ``log_lr`` = log α, each ``(S, E)``; ``grid_d2`` ``(K, K)``.
+    """
+    if not enabled():
+        _note(f"{ENV_SWITCH}=0", logging.INFO)
+        return False
+    if weight.device.type != "cpu" or weight.dtype not in (torch.float32, torch.float64) \
+            or not weight.is_contiguous() or xs.dtype != weight.dtype:
+        _note(f"online rule with weight {weight.dtype} on {weight.device}, samples {xs.dtype}")
+        return False
+    lib = library()
+    if lib is None:
+        return False
+    e, k, d = weight.shape
+    s = xs.shape[1]
+    dt = weight.dtype
+    xc = xs.detach().contiguous()
+    cc = coef.detach().to(dt).reshape(s, e).contiguous()
+    lc = log_lr.detach().to(dt).reshape(s, e).contiguous()
+    gc = grid_d2.detach().to(device="cpu", dtype=dt).contiguous()
+    fn = lib.somtorch_online_f32 if dt == torch.float32 else lib.somtorch_online_f64
+    rc = fn(weight.data_ptr(), xc.data_ptr(), 0 if xc.shape[0] == 1 else s * d, cc.data_ptr(),
+            lc.data_ptr(), gc.data_ptr(), e, s, k, d, kernel_threads())
+    if rc != 0:
+        _note(_refusal(rc, e, s, k, d))
+        return False
+    return True

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import weakref
 from collections.abc import Sequence
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,7 @@ from .init import INITS, init_pca, init_random, init_sample
 from .losses import soft_assign, som_energy
 from .metrics import quantization_error, topographic_error, umatrix
 from .neighborhood import NEIGHBORHOODS, NeighborhoodFn
+from .threads import contended
 from .training import Callback, Order, Schedules, run
 
 MODES = ("online", "batch", "minibatch")
@@ -328,9 +330,11 @@ class SOM(nn.Module):
         cached = self._order_state if self._plan is not None else None
         if cached is not None and cached[0] == (stream_order.kind, n):  # a mini-batch epoch split across calls
             stream_order._epoch, stream_order._perm = cached[1], cached[2]
-        run(self.weight.data, x, mode=mode, steps=steps, batch_size=batch_size, order=stream_order,
-            sched=sched, grid_d2=self.grid_d2, neighborhood=nb, progress=progress, callback=callback,
-            callback_every=callback_every, desc=f"SOM {mode}", offset=offset, total=total)
+        # on a busy CPU: no more torch threads than the cores other processes leave free (same bits)
+        with contended() if self.weight.device.type == "cpu" else nullcontext():
+            run(self.weight.data, x, mode=mode, steps=steps, batch_size=batch_size, order=stream_order,
+                sched=sched, grid_d2=self.grid_d2, neighborhood=nb, progress=progress, callback=callback,
+                callback_every=callback_every, desc=f"SOM {mode}", offset=offset, total=total)
         self._order_state = ((stream_order.kind, n), stream_order._epoch, stream_order._perm) \
             if self._plan is not None else None
         return self

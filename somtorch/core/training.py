@@ -23,7 +23,7 @@ import torch
 
 from .decay import DecayFn, schedule
 from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search
-from .native import native_accumulate
+from .native import native_accumulate, native_online
 from .neighborhood import NeighborhoodFn, gaussian
 
 BLOCK_STEPS = 4096  # steps whose samples and schedule values are prepared at once (online rule)
@@ -140,6 +140,8 @@ def online_block(weight: torch.Tensor, xs: torch.Tensor, lr: torch.Tensor, sigma
         # h = α exp(−d²/2σ²) = exp(log α + d² · (−1/2σ²)): two kernels per step instead of four
         coef = (-0.5 / (sigma * sigma)).unsqueeze(-1)  # (S, E, 1)
         log_lr = torch.log(lr).unsqueeze(-1)  # (S, E, 1)
+        if native_online(weight.data, xs, coef, log_lr, grid_d2):  # the compiled loop (CPU)
+            return
         if weight.shape[0] == 1 and weight.device.type == "cpu":
             _online_solo_cpu(weight[0], xs[0], coef.view(-1), log_lr.view(-1), grid_d2)
             return
@@ -208,10 +210,12 @@ def batch_target(sums: torch.Tensor, counts: torch.Tensor, sigma: torch.Tensor, 
         the denominator ``(E, K)`` (0 where no sample reaches the unit).
     """
     h = neighborhood(grid_d2.unsqueeze(0), sigma.view(-1, 1, 1))  # (E, K, K), symmetric
-    # explicit products and sums rather than bmm: the same summation order for every ensemble size,
-    # so member e equals the solo map bitwise (the tensors are tiny, K·K·D per member)
-    num = (h.unsqueeze(-1) * sums.unsqueeze(1)).sum(2)  # (E, K, K, D) → (E, K, D)
-    den = (h * counts.unsqueeze(1)).sum(2)  # (E, K)
+    # one batched matrix product for numerators and denominators (the counts ride along as an
+    # extra column): no (E, K, K, D) intermediate, so a 16 x 16 ensemble costs what its members
+    # do; every member is its own product of the batch, so member e equals the solo map bitwise
+    # (tests/core check it for small and large grids)
+    both = torch.bmm(h, torch.cat([sums, counts.unsqueeze(-1)], dim=-1))  # (E, K, D + 1)
+    num, den = both[..., :-1], both[..., -1]
     return num / den.clamp_min(torch.finfo(den.dtype).tiny).unsqueeze(-1), den
 
 

@@ -242,3 +242,50 @@ def test_concurrent_first_builds_share_one_library(kernel, tmp_path):
         assert "torch.Size([2, 50])" in out
     assert len(list(tmp_path.glob("*.so"))) == 1
     assert not list(tmp_path.glob("*.tmp*"))
+
+
+def _online_torch(weight, xs, coef, log_lr, grid_d2):
+    """The torch formulation of the gaussian online rule (training.online_block's loop), step by step."""
+    w = weight.clone()
+    for s in range(xs.shape[1]):
+        x_t = xs[:, s] if xs.shape[0] > 1 else xs[0, s].expand(w.shape[0], -1)
+        diff = x_t.unsqueeze(1) - w
+        c = diff.square().sum(-1).argmin(-1)
+        h = torch.exp(log_lr[s].unsqueeze(-1) + grid_d2[c] * coef[s].unsqueeze(-1))
+        w += h.unsqueeze(-1) * diff
+    return w
+
+
+@pytest.mark.parametrize("dtype,tol", [(torch.float32, 2e-6), (torch.float64, 1e-14)], ids=["f32", "f64"])
+@pytest.mark.parametrize("member", [False, True], ids=["shared", "member"])
+@pytest.mark.parametrize("k,d", [(28, 3), (1, 2), (9, 7), (256, 3)], ids=["K28-D3", "K1-D2", "K9-D7", "K256-D3"])
+def test_online_rule_equals_the_torch_formulation(kernel, k, d, member, dtype, tol):
+    g = torch.Generator().manual_seed(k * 10 + d)
+    e, s = 3, 200
+    w0 = torch.rand(e, k, d, generator=g, dtype=dtype)
+    xs = torch.rand(e if member else 1, s, d, generator=g, dtype=dtype)
+    sigma = torch.linspace(2.0, 0.5, s, dtype=dtype)[:, None].expand(s, e).contiguous()
+    coef = -0.5 / sigma ** 2
+    log_lr = torch.log(torch.linspace(0.5, 0.01, s, dtype=dtype))[:, None].expand(s, e).contiguous()
+    grid_d2 = torch.randint(0, 30, (k, k), generator=g).to(dtype)
+    grid_d2 = (grid_d2 + grid_d2.T).fill_diagonal_(0)
+    w = w0.clone()
+    assert native.native_online(w, xs, coef, log_lr, grid_d2)
+    ref = _online_torch(w0, xs, coef, log_lr, grid_d2)
+    assert torch.allclose(w, ref, rtol=0, atol=tol), (w - ref).abs().max()
+    assert not torch.equal(w, w0)
+    # a member computed alone gives the same bits as in the ensemble (threads take whole members)
+    solo = w0[1:2].clone()
+    assert native.native_online(solo, xs[1:2] if member else xs, coef[:, 1:2].contiguous(),
+                                log_lr[:, 1:2].contiguous(), grid_d2)
+    assert torch.equal(solo[0], w[1])
+
+
+def test_online_rule_refuses_nan_weights_and_foreign_dtypes(kernel):
+    w = torch.rand(1, 4, 3)
+    w[0, 2, 1] = float("nan")
+    xs, c, lr, g = torch.rand(1, 5, 3), -torch.ones(5, 1), torch.zeros(5, 1), torch.zeros(4, 4)
+    before = w.clone()
+    assert not native.native_online(w, xs, c, lr, g)  # the torch path decides what NaN does
+    assert torch.equal(w.nan_to_num(), before.nan_to_num())
+    assert not native.native_online(torch.rand(1, 4, 3, dtype=torch.float16), xs.half(), c, lr, g)

@@ -73,6 +73,17 @@ def test_ensemble_member_equals_solo_run(mode, x3):
     assert torch.equal(ens.member(2).weight[0], ens.weight[2]) and ens.member(2).seeds == [12]
 
 
+@pytest.mark.parametrize("mode", ["batch", "online"])
+def test_large_grid_ensemble_member_equals_solo_run(mode, x3):
+    # 16 x 16: the batch target is one batched product per member; the online rule one compiled loop
+    kw = {"epochs": 3} if mode == "batch" else {"iterations": 500}
+    ens = SOM(16, 16, D, ensemble=5, seed=40).fit(x3, mode=mode, progress=False, **kw)
+    for e in (0, 4):
+        solo = SOM(16, 16, D, seed=40 + e).fit(x3, mode=mode, progress=False, **kw)
+        assert torch.equal(ens.weight[e], solo.weight[0]), e
+    assert not torch.equal(ens.weight[0], ens.weight[4])
+
+
 @pytest.mark.parametrize("mode", MODES)
 def test_ensemble_with_per_member_hyper_parameters_equals_solo_runs(mode, x3):
     lr = torch.tensor([0.6, 0.3, 0.1])

@@ -15,6 +15,7 @@
 // OpenMP comes from the libgomp that torch has already loaded (same soname), so it shares
 // torch's thread pool.
 
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <limits>
@@ -315,12 +316,76 @@ int entry(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_
   return 0;
 }
 
+// Kohonen's online rule with a gaussian neighbourhood: S consecutive steps for each of E members,
+// in place on w (E, K, D). Step s of member e, with its sample x = xs[e * xs_stride + s * D]:
+//     c   = argmin_k sum_d (x_d - w_kd)^2          (first index on ties)
+//     h_k = exp(log_lr[s, e] + g[c, k] * coef[s, e])   (coef = -1 / (2 sigma^2), g = grid d^2)
+//     w_k = w_k + h_k * (x - w_k)
+// the operations of somtorch.core.training.online_block in the same precision and order (the
+// exponential is the C library's, so results agree with the torch path to rounding, not bits).
+// Members are independent: threads take whole members, so member e equals a solo map bitwise.
+template <typename T, int DC>
+void run_online(T* w, const T* xs, int64_t xs_stride, const T* coef, const T* log_lr, const T* g,
+                int64_t E, int64_t S, int64_t K, int64_t D, int nthreads) {
+  nthreads = clamp_threads(nthreads, (double)E * (double)S * (double)K * (double)D * 16.0, E);
+#pragma omp parallel num_threads(nthreads) if (nthreads > 1)
+  {
+    const int64_t DD = DC > 0 ? DC : D;
+    std::vector<T> diff_buf((size_t)(K * DD)), h_buf((size_t)K);
+    T* __restrict diff = diff_buf.data();
+    T* __restrict h = h_buf.data();
+#pragma omp for schedule(dynamic, 1)
+    for (int64_t e = 0; e < E; ++e) {
+      T* __restrict we = w + e * K * DD;
+      const T* xe = xs + e * xs_stride;
+      for (int64_t s = 0; s < S; ++s) {
+        const T* x = xe + s * DD;
+        int64_t c = 0;
+        T best = std::numeric_limits<T>::infinity();
+        for (int64_t k = 0; k < K; ++k) {
+          T acc = 0;
+          for (int64_t d = 0; d < DD; ++d) {
+            const T v = x[d] - we[k * DD + d];
+            diff[k * DD + d] = v;
+            acc = acc + v * v;
+          }
+          if (acc < best) {
+            best = acc;
+            c = k;
+          }
+        }
+        const T a = log_lr[s * E + e], b = coef[s * E + e];
+        const T* gc = g + c * K;
+        for (int64_t k = 0; k < K; ++k) h[k] = std::exp(a + gc[k] * b);
+        for (int64_t k = 0; k < K; ++k)
+          for (int64_t d = 0; d < DD; ++d) we[k * DD + d] = we[k * DD + d] + h[k] * diff[k * DD + d];
+      }
+    }
+  }
+}
+
+template <typename T>
+int entry_online(T* w, const T* xs, int64_t xs_stride, const T* coef, const T* log_lr, const T* g,
+                 int64_t E, int64_t S, int64_t K, int64_t D, int nthreads) {
+  if (E < 1 || S < 0 || K < 1 || D < 1) return 1;
+  if (has_nan(w, E * K * D)) return 2;
+  if (S == 0) return 0;
+  switch (D) {
+    case 1: run_online<T, 1>(w, xs, xs_stride, coef, log_lr, g, E, S, K, D, nthreads); break;
+    case 2: run_online<T, 2>(w, xs, xs_stride, coef, log_lr, g, E, S, K, D, nthreads); break;
+    case 3: run_online<T, 3>(w, xs, xs_stride, coef, log_lr, g, E, S, K, D, nthreads); break;
+    case 4: run_online<T, 4>(w, xs, xs_stride, coef, log_lr, g, E, S, K, D, nthreads); break;
+    default: run_online<T, 0>(w, xs, xs_stride, coef, log_lr, g, E, S, K, D, nthreads); break;
+  }
+  return 0;
+}
+
 }  // namespace
 
 extern "C" {
 
 // Version of this C ABI; native.py refuses a library that reports another one.
-int somtorch_bmu_abi(void) { return 2; }
+int somtorch_bmu_abi(void) { return 3; }
 
 int somtorch_bmu_f32(const float* x, int64_t x_stride, const float* w, int64_t E, int64_t N,
                      int64_t K, int64_t D, int top, int64_t* out, int nthreads) {
@@ -341,6 +406,18 @@ int somtorch_accumulate_f64(const double* x, int64_t x_stride, const double* w, 
                             int64_t N, int64_t K, int64_t D, double* sums, int64_t* counts,
                             int nthreads) {
   return entry_acc<double>(x, x_stride, w, E, N, K, D, sums, counts, nthreads);
+}
+
+int somtorch_online_f32(float* w, const float* xs, int64_t xs_stride, const float* coef,
+                        const float* log_lr, const float* g, int64_t E, int64_t S, int64_t K,
+                        int64_t D, int nthreads) {
+  return entry_online<float>(w, xs, xs_stride, coef, log_lr, g, E, S, K, D, nthreads);
+}
+
+int somtorch_online_f64(double* w, const double* xs, int64_t xs_stride, const double* coef,
+                        const double* log_lr, const double* g, int64_t E, int64_t S, int64_t K,
+                        int64_t D, int nthreads) {
+  return entry_online<double>(w, xs, xs_stride, coef, log_lr, g, E, S, K, D, nthreads);
 }
 
 }  // extern "C"
