@@ -102,7 +102,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
     ys, xs = ctx.valid.nonzero(as_tuple=True)
     box = (int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())) if ys.numel() else (0, 0, -1, -1)
     whole = ObjectArea(sorted({int(v) for v in labels.unique().tolist()} - {-1}), int(ctx.valid.sum()), box,
-                       float(ctx.disparity[ctx.valid].mean()) if ys.numel() else 0.0, 0.0, 1.0, 0, confidence=0.0)
+                       float(torch.masked_select(ctx.disparity, ctx.valid).mean()) if ys.numel() else 0.0, 0.0, 1.0, 0, confidence=0.0)
     return ObjectResult(stats, areas, [whole], no_object=True)
 
 

@@ -114,7 +114,7 @@ def disparity_spread(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[tupl
     They depend on the segmented pixels only, not on the segments, so the members of an ensemble
     (which all segment the same pixels) can share one computation (``neuron_stats(spread=…)``).
     """
-    d = disparity[valid]
+    d = torch.masked_select(disparity, valid)  # = disparity[valid] (same order), 2-3x faster
     step = max(1, d.numel() // 20_000)
     sample = d[::step].double()
     n = sample.numel()
