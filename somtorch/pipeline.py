@@ -15,7 +15,7 @@ import logging
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import torch
@@ -30,7 +30,7 @@ from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
 from .tasks.detect import MapContext, find_objects
 from .tasks.ground import GroundPlane, fit_ground_plane
 from .tasks.objects import NeuronStats, ObjectArea
-from .tasks.reduction import Reduction, reduce_map
+from .tasks.reduction import Reduction, reduce_map, valid_integral
 from .tasks.scoring import Score, optimal_reduction, score_reduction
 
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
@@ -96,9 +96,18 @@ def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
     if n < need:
         raise ValueError(f"scene {scene.name!r}: only {n} valid pixel(s); the segmentation needs at least {need} "
                          f"(one per SOM neuron, {cfg.som.rows}x{cfg.som.cols}); is the right disparity file loaded?")
-    d = torch.masked_select(scene.disparity, scene.valid)  # = disparity[valid], 2-3x faster
-    lo, hi = float(d.min()), float(d.max())
-    if hi - lo <= 1e-6 * max(1.0, abs(hi)):
+
+    def flat(d: torch.Tensor) -> tuple[float, float, bool]:
+        lo, hi = float(d.min()), float(d.max())
+        return lo, hi, hi - lo <= 1e-6 * max(1.0, abs(hi))
+
+    # a 1/16 sample that already varies proves the whole map does (its spread can only be larger,
+    # by at least as much as its largest value grows); only a flat-looking sample needs every pixel
+    sample = torch.masked_select(scene.disparity[::4, ::4], scene.valid[::4, ::4])
+    constant = sample.numel() < 2 or flat(sample)[2]
+    if constant:
+        lo, hi, constant = flat(torch.masked_select(scene.disparity, scene.valid))
+    if constant:
         raise ValueError(f"scene {scene.name!r}: every valid pixel has disparity {lo:g} px, a constant map with "
                          "nothing to single out" + (" (an all-zero map: the file holds no disparity, or "
                                                     "0 should mean 'invalid' and does not in this format)" if lo == 0 else ""))
@@ -139,22 +148,29 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
            timer: _Timer | None = None) -> list[MemberResult]:
     """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d)."""
     timer = timer or _Timer()
+    st = cfg.objects.map_stride
     with timer("objects"):  # every member segments the same pixels: one context for all
-        ctx = MapContext.build(scene.disparity, scene.valid, seg.labels[0] >= 0, ground, cfg.objects)
+        disp, valid, labels, image, g, ocfg = _strided(scene, seg.labels, ground, cfg.objects)
+        ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg, image)
+        integral = ctx.integral if st == 1 else valid_integral(scene.valid)  # the reduction's: full size
     obj_mask, x_opt = None, None
     if scene.objects is not None:
         obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
-        x_opt = optimal_reduction(obj_mask, scene.valid, ctx.integral)  # the same for every member
+        x_opt = optimal_reduction(obj_mask, scene.valid, integral)  # the same for every member
     r = cfg.reduction
     members = []
+    h, w = scene.disparity.shape
     for e in range(seg.labels.shape[0]):
         with timer("objects"):
-            found = find_objects(seg.labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, cfg.objects,
+            found = find_objects(labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, ocfg,
                                  None if seg.ref_color is None else seg.ref_color[e])
+            if st > 1:
+                found.areas = [_full_size(a, st, h, w) for a in found.areas]
+                found.kept = [_full_size(a, st, h, w) for a in found.kept]
         with timer("reduction"):
             red = reduce_map([a.box for a in found.kept], scene.valid, tolerance_px=r.tolerance_px,
                              tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image,
-                             integral=ctx.integral)
+                             integral=integral)
         score = score_reduction(red, obj_mask, scene.valid, x_opt=x_opt) if obj_mask is not None else None
         members.append(MemberResult(seg.seeds[e], found.areas, found.kept, red, score, found.stats,
                                     found.no_object))
@@ -167,6 +183,31 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
         log.warning("scene %s: %d of %d member(s) found no convincing object area; the whole map is kept "
                     "(flagged no_object)", scene.name, fallback, len(members))
     return members
+
+
+def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg: AreaConfig):
+    """The maps the object step reads: every ``cfg.map_stride``-th pixel in y and x (all at 1).
+
+    The ground plane is re-expressed in the sampled pixel coordinates and the refinement's own
+    sampling (``grow_stride``) divided by the stride, so that it keeps reading the same pixels.
+    """
+    s = cfg.map_stride
+    if s == 1:
+        return scene.disparity, scene.valid, labels, scene.image, ground, cfg
+    g = None if ground is None else GroundPlane(ground.a * s, ground.b * s, ground.c, ground.tol,
+                                                ground.mask[::s, ::s].contiguous(), ground.inlier_frac)
+    image = None if scene.image is None else scene.image[:, ::s, ::s].contiguous()
+    return (scene.disparity[::s, ::s].contiguous(), scene.valid[::s, ::s].contiguous(),
+            labels[:, ::s, ::s].contiguous(), image, g, replace(cfg, grow_stride=max(1, cfg.grow_stride // s)))
+
+
+def _full_size(area: ObjectArea, s: int, h: int, w: int) -> ObjectArea:
+    """An area found on a map sampled every ``s`` pixels, in the full map's pixel coordinates."""
+    def box(b: tuple[int, int, int, int] | None) -> tuple[int, int, int, int] | None:
+        if b is None or b[2] < b[0]:
+            return b
+        return (b[0] * s, b[1] * s, min(w - 1, b[2] * s), min(h - 1, b[3] * s))
+    return replace(area, box=box(area.box), segment_box=box(area.segment_box), pixels=area.pixels * s * s)
 
 
 def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: bool = False,

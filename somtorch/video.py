@@ -90,7 +90,9 @@ class SequenceRunner:
             share = float(mask.sum()) / max(int(valid.sum()), 1)
             if share >= self.ground_keep * g.inlier_frac:
                 self._ground_age += 1
-                return GroundPlane(g.a, g.b, g.c, g.tol, mask, share), True
+                plane = GroundPlane(g.a, g.b, g.c, g.tol, mask, share)
+                plane._cache = g._cache  # the same plane: its disparity map is not recomputed
+                return plane, True
         g = fit_ground_plane(scene.disparity, valid, cfg)
         self._ground, self._ground_age = g, 0
         return g, False

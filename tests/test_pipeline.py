@@ -234,3 +234,43 @@ def test_an_unavailable_device_is_refused_before_training():
     if not torch.cuda.is_available():
         with pytest.raises(ValueError, match="cuda.is_available"):
             run_pipeline(scene, with_overrides(PipelineConfig(), {"device": "cuda"}))
+
+
+def test_object_step_on_a_strided_map_keeps_full_size_boxes(motorcycle):
+    from dataclasses import replace
+
+    from somtorch.tasks.objects import AreaConfig
+
+    full = run_pipeline(motorcycle, replace(_cfg(ensemble=2), objects=AreaConfig(map_stride=1)), metrics=False)
+    half = run_pipeline(motorcycle, replace(_cfg(ensemble=2), objects=AreaConfig(map_stride=2)), metrics=False)
+    h, w = motorcycle.disparity.shape
+    for a, b in zip(full.members, half.members):
+        x0, y0, x1, y1 = b.kept[0].box
+        assert 0 <= x0 <= x1 < w and 0 <= y0 <= y1 < h
+        assert x0 % 2 == 0 and y0 % 2 == 0  # corners on the sampled grid, in full-size pixels
+        # the same object, within a few pixels of the box found on every pixel
+        assert max(abs(u - v) for u, v in zip(a.kept[0].box, b.kept[0].box)) <= 0.02 * max(h, w)
+        # the reduction is computed on the full map, for the full-size boxes
+        want = reduce_map([k.box for k in b.kept], motorcycle.valid, tolerance_image=_cfg().reduction.tolerance_image)
+        assert b.reduction.reduction_union == pytest.approx(want.reduction_union)
+        assert b.kept[0].pixels % 4 == 0  # sampled pixels counted at full size
+
+
+def test_the_paper_preset_reads_every_pixel():
+    from experiments.distributed import compose_config
+
+    assert compose_config(["+preset=paper", "train.parallel=none"])[0].objects.map_stride == 1
+    assert compose_config(["train.parallel=none"])[0].objects.map_stride == 2
+
+
+def test_a_map_that_varies_only_off_the_check_sample_is_usable():
+    from somtorch.disparity.scene import scene_from_arrays
+    from somtorch.pipeline import check_usable
+
+    d = torch.full((40, 40), 5.0)
+    valid = torch.ones(40, 40, dtype=torch.bool)
+    check = PipelineConfig()
+    with pytest.raises(ValueError, match="constant map"):
+        check_usable(scene_from_arrays(d, valid, name="flat"), check)
+    d[1, 3] = 9.0  # not on the 4-pixel grid of the quick sample: the full check must see it
+    check_usable(scene_from_arrays(d, valid, name="one"), check)

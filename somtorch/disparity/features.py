@@ -71,7 +71,7 @@ class Features:
             # rank of every pixel among the feature rows, read at the strided grid
             rank = torch.cumsum(self.mask.view(-1), 0).view(self.shape) - 1
             on_grid = self.mask[::stride, ::stride]
-            keep = rank[::stride, ::stride][on_grid]
+            keep = torch.masked_select(rank[::stride, ::stride], on_grid)  # = [on_grid], faster
             sub = torch.zeros_like(self.mask)
             sub[::stride, ::stride] = on_grid
         else:

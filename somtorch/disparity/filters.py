@@ -43,3 +43,4 @@ def remove_speckles(disparity: torch.Tensor, valid: torch.Tensor, *, max_size_fr
     q = np.where(ok, np.clip(np.round(d * scale), 1, 32767), 0).astype(np.int16)
     cv2.filterSpeckles(q, 0, max(1, int(max_size_frac * h * w)), max(1, int(round(max_diff_frac * spread * scale))))
     return torch.from_numpy(q != 0).to(valid.device) & valid
+

@@ -26,7 +26,7 @@ from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_are
 from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, _square, box_purity, grow_area, map_solidity, merge_adjacent, refine_box
 
-__all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "rank_score"]
+__all__ = ["MapContext", "ObjectResult", "find_objects", "image_edges", "kept_areas", "rank_score"]
 
 
 @dataclass
@@ -42,6 +42,8 @@ class MapContext:
         solidity: :func:`~somtorch.tasks.refine.map_solidity` of the segmented pixels.
         ground_residual: |disparity − ground plane| ``(H, W)`` or None (no plane, or clutter off).
         clutter_band: ``ground_clutter ×`` the plane's inlier band, px (0 without a plane).
+        edges: pixels near an edge of the left image ``(H, W)`` bool (:func:`image_edges`), or None
+            (no image, or ``edge_rank`` off).
     """
 
     disparity: torch.Tensor
@@ -52,19 +54,46 @@ class MapContext:
     solidity: float
     ground_residual: torch.Tensor | None
     clutter_band: float
+    edges: torch.Tensor | None = None
 
     @classmethod
     def build(cls, disparity: torch.Tensor, valid: torch.Tensor, segmented: torch.Tensor,
-              ground: GroundPlane | None, cfg: AreaConfig) -> MapContext:
-        """The context of a map whose ``segmented`` ``(H, W)`` pixels carry a label (``labels >= 0``)."""
+              ground: GroundPlane | None, cfg: AreaConfig, image: torch.Tensor | None = None) -> MapContext:
+        """The context of a map whose ``segmented`` ``(H, W)`` pixels carry a label (``labels >= 0``);
+        ``image``: the left image ``(3, H, W)`` uint8, used by ``cfg.edge_rank``."""
         h, w = disparity.shape
         residual, band = None, 0.0
         if ground is not None and cfg.ground_clutter > 0 and not cfg.grow:
             residual = (disparity - ground.disparity(h, w)).abs()
             band = cfg.ground_clutter * ground.tol
         lab = torch.where(segmented, 0, -1)
+        edges = image_edges(image) if image is not None and cfg.edge_rank > 0 \
+            and tuple(image.shape[-2:]) == (h, w) else None
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
-                   map_solidity(lab, cfg), residual, band)
+                   map_solidity(lab, cfg), residual, band, edges)
+
+
+def image_edges(image: torch.Tensor, reach_frac: float = 0.005) -> torch.Tensor:
+    """Pixels within ``reach_frac ×`` the image diagonal (at least 1 px) of a Canny edge of the image.
+
+    Canny's thresholds are 0.66 and 1.33 × the median grey level (the usual automatic choice), so
+    the edge density adapts to the image's exposure; the reach absorbs the few pixels by which a
+    computed disparity boundary misses the outline (foreground fattening).
+
+    Shape:
+        ``image`` ``(3, H, W)`` or ``(1, H, W)`` uint8 → ``(H, W)`` bool.
+    """
+    import cv2
+    import numpy as np
+
+    a = image.detach().cpu().numpy()
+    gray = cv2.cvtColor(np.ascontiguousarray(a.transpose(1, 2, 0)), cv2.COLOR_RGB2GRAY) if a.shape[0] == 3 else a[0]
+    med = float(np.median(gray))
+    edges = cv2.Canny(np.ascontiguousarray(gray), int(max(0.0, 0.66 * med)), int(min(255.0, 1.33 * med)))
+    h, w = gray.shape
+    r = max(1, round(reach_frac * (h * h + w * w) ** 0.5))
+    near = cv2.dilate(edges, np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
+    return torch.from_numpy(near)
 
 
 @dataclass
@@ -93,7 +122,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
         ``grid_d2`` ``(K, K)`` or None; ``ref_color`` ``(K, 3)`` Y, Cb, Cr or None.
     """
     cfg = cfg or AreaConfig()
-    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread)
+    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread, edges=ctx.edges)
     areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, ref_color)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:

@@ -11,7 +11,7 @@ image half and refines it by least squares on the inliers; a plane that does not
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
@@ -30,11 +30,17 @@ class GroundPlane:
     mask: torch.Tensor
     inlier_frac: float
 
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
     def disparity(self, h: int, w: int) -> torch.Tensor:
-        """The plane's disparity at every pixel ``(H, W)``."""
-        ys = torch.arange(h, dtype=torch.float64)[:, None]
-        xs = torch.arange(w, dtype=torch.float64)[None, :]
-        return (self.a * xs + self.b * ys + self.c).float()
+        """The plane's disparity at every pixel ``(H, W)`` (computed once per size; do not modify it)."""
+        key = (h, w, self.a, self.b, self.c)
+        if key not in self._cache:
+            ys = torch.arange(h, dtype=torch.float64)[:, None]
+            xs = torch.arange(w, dtype=torch.float64)[None, :]
+            self._cache.clear()
+            self._cache[key] = (self.a * xs + self.b * ys + self.c).float()
+        return self._cache[key]
 
     def as_dict(self) -> dict:
         return {"a": self.a, "b": self.b, "c": self.c, "tol": self.tol, "inlier_frac": self.inlier_frac}

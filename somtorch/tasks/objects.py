@@ -49,6 +49,8 @@ class NeuronStats:
         d_range: (min, max) disparity of the map.
         d_robust: (5th, 95th) percentile of the disparity of the map.
         perimeter: boundary length of each segment with other segments ``(K,)``.
+        edge_boundary: the part of ``boundary`` that lies on image edges ``(K, K)`` (pixel pairs
+            with an edge pixel at either end), or None without an edge map.
     """
 
     count: torch.Tensor
@@ -57,6 +59,7 @@ class NeuronStats:
     boundary: torch.Tensor
     d_range: tuple[float, float]
     d_robust: tuple[float, float]
+    edge_boundary: torch.Tensor | None = None
 
     @property
     def perimeter(self) -> torch.Tensor:
@@ -124,12 +127,14 @@ def disparity_spread(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[tupl
 
 
 def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int, *,
-                 spread: tuple[tuple[float, float], tuple[float, float]] | None = None) -> NeuronStats:
+                 spread: tuple[tuple[float, float], tuple[float, float]] | None = None,
+                 edges: torch.Tensor | None = None) -> NeuronStats:
     """Statistics of the segments of one label map.
 
     Args:
         spread: :func:`disparity_spread` of ``disparity`` over ``labels >= 0`` if already known
             (computed here otherwise).
+        edges: ``(H, W)`` bool, pixels on (or near) an image edge; gives ``edge_boundary``.
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 invalid), ``disparity`` ``(H, W)``.
@@ -159,11 +164,20 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     pairs = []
     for a, b in ((lab[:, :-1], lab[:, 1:]), (lab[:-1, :], lab[1:, :])):
         pairs.append((a * (k + 1) + b).reshape(-1))
-    boundary = torch.bincount(torch.cat(pairs), minlength=(k + 1) ** 2).view(k + 1, k + 1)[:k, :k].double()
-    boundary.fill_diagonal_(0.0)
-    boundary = boundary + boundary.T
+    flat = torch.cat(pairs)
+
+    def symmetric(counts: torch.Tensor) -> torch.Tensor:
+        m = counts.view(k + 1, k + 1)[:k, :k].double()
+        m.fill_diagonal_(0.0)
+        return m + m.T
+
+    boundary = symmetric(torch.bincount(flat, minlength=(k + 1) ** 2))
+    edge_boundary = None
+    if edges is not None:
+        on = torch.cat([(edges[:, :-1] | edges[:, 1:]).reshape(-1), (edges[:-1, :] | edges[1:, :]).reshape(-1)])
+        edge_boundary = symmetric(torch.bincount(flat, weights=on.double(), minlength=(k + 1) ** 2))
     d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
-    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust)
+    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, edge_boundary)
 
 
 def _components(adj: torch.Tensor) -> list[list[int]]:
@@ -239,6 +253,14 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
         around_c = (border @ rc) / b_len.clamp_min(1e-300)[:, None]
         c_con = torch.where(b_len > 0, (own_c - around_c).norm(dim=1), torch.zeros_like(mean))
         salience = salience + cfg.color_rank * stats.spread(cfg.spread) * c_con
+    if stats.edge_boundary is not None and cfg.edge_rank > 0:
+        # a depth boundary that no image edge follows is a matching artefact, not an object's
+        # outline: the share of the area's border on image edges, against the map's share
+        e_border = ((onehot @ stats.edge_boundary) * (1.0 - onehot)).sum(1)
+        share = torch.where(b_len > 0, e_border / b_len.clamp_min(1e-300), torch.ones_like(mean))
+        map_share = float(stats.edge_boundary.sum() / stats.boundary.sum().clamp_min(1e-300))
+        if map_share > 0:
+            salience = salience * (share / map_share).clamp(max=1.0) ** cfg.edge_rank
     nonempty = stats.count > 0
     big = torch.iinfo(torch.long).max
     x0 = torch.full((len(comps),), big).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 0], "amin")
