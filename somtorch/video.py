@@ -9,7 +9,9 @@ A scene changes little from one frame to the next, so :class:`SequenceRunner` ke
   ``ground_keep`` × the share it had when fitted), refitted otherwise and every
   ``ground_every`` frames;
 * **buffers**: the camera and the config are the sequence's; the SOM's grid and generators live
-  across frames.
+  across frames;
+* **work nobody reads**: a warm frame labels only the pixels the object step reads (every
+  ``objects.map_stride``-th in y and x), so its results equal those of the full label map.
 
 :func:`iter_sequence` is the library iterator; ``python -m experiments.video`` the Hydra
 experiment (a synthetic camera motion over a real scene when no sequence is given), and
@@ -115,7 +117,10 @@ class SequenceRunner:
             w = self.som.weight.detach()
             seg: Segmentation = _from_prototypes(w, feats, self.som.grid_d2, self.som, self.som.seeds)
             with timer("segment"):
-                seg.labels = segment(w, feats.x, feats.pixels, feats.shape)
+                # only the pixels the object step reads (every objects.map_stride-th in y and x):
+                # the frame's results are those of the full label map, at a quarter of the BMUs
+                grid = feats.subsample(cfg.objects.map_stride)
+                seg.labels = segment(w, grid.x, grid.pixels, grid.shape)
         else:  # cold: exactly run_pipeline's segmenter
             seg = run_segmenter(feats, train, scene, usable, cfg, timer=timer)
             self.som = seg.som

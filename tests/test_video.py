@@ -57,3 +57,29 @@ def test_runner_checks_its_settings():
         SequenceRunner(warm_epochs=0)
     with pytest.raises(ValueError):
         SequenceRunner(ground_keep=1.5)
+
+
+def test_a_warm_frame_labels_only_what_the_object_step_reads_with_the_same_result():
+    from somtorch.pipeline import detect, prepare
+    from somtorch.segmenters import _from_prototypes
+    from somtorch.tasks.segmentation import segment
+
+    cfg = with_overrides(PipelineConfig(), {"ensemble": 1})
+    assert cfg.objects.map_stride == 2
+    frames = list(pan_sequence(_world(), 120, 90, 3, step_px=3))
+    runner = SequenceRunner(cfg)
+    runner.step(frames[0])
+    runner.step(frames[1])
+    w_before = runner.som.weight.detach().clone()
+    got = runner.step(frames[2])
+    assert got.warm
+    # the same frame with every pixel labelled: the runner's weights after its warm training
+    valid, ground, usable, feats, train = prepare(frames[2], cfg, ground_fn=lambda v: got.ground)
+    w = runner.som.weight.detach()
+    assert not torch.equal(w, w_before)  # the frame trained
+    seg = _from_prototypes(w, feats, runner.som.grid_d2, runner.som, runner.som.seeds)
+    seg.labels = segment(w, feats.x, feats.pixels, feats.shape)
+    want = detect(frames[2], seg, ground, cfg)
+    for g, r in zip(got.members, want):
+        assert [a.box for a in g.kept] == [a.box for a in r.kept]
+        assert g.reduction.reduction_union == r.reduction.reduction_union
