@@ -771,7 +771,9 @@ def main(argv: list[str] | None = None) -> int:
                        [[r["grid"], r["library"], f"{r['qe']:.4f}", common.secs(r["timing"].median),
                          common.secs(r["timing"].min)] for r in quality], align="llrrr"))
     matched = matched_quality(quality)
-    if matched:
+    if not matched:
+        print("\nSpeed at matched quality: no peer SOM library installed here (bash scripts/setup.sh bench)")
+    else:
         print("\nSpeed at matched quality (the fastest somtorch setting within 5 % of the best peer's QE, "
               "against the fastest peer within 5 %):")
         print(common.table(["grid", "best peer QE", "somtorch setting", "its QE", "its time", "fastest peer",
