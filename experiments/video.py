@@ -8,7 +8,7 @@ scored frame by frame). Runs :class:`somtorch.video.SequenceRunner` and writes `
 stage timings; the frames per second; useful hits where scored) into the Hydra run folder.
 
     python -m experiments.video                                     # 60-frame pan over the Motorcycle
-    python -m experiments.video data=middlebury2014 sequence.frames=120 sequence.warm=false
+    python -m experiments.video data=middlebury_motorcycle_q sequence.frames=120 sequence.warm=false
     python -m experiments.video 'sequence.glob=/data/seq/disp_*.png'
 """
 

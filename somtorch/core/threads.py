@@ -27,6 +27,7 @@ its core. ``SOMTORCH_THREADS`` fixes the count and turns this off.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import threading
@@ -37,6 +38,8 @@ from pathlib import Path
 
 ENV_THREADS = "SOMTORCH_THREADS"
 CGROUP_ROOT = Path("/sys/fs/cgroup")
+logger = logging.getLogger(__name__)
+_warned: set[tuple[str, str]] = set()
 
 
 def _positive_int(text: str | None) -> int | None:
@@ -51,11 +54,16 @@ def _positive_int(text: str | None) -> int | None:
 
 
 def env_threads() -> int | None:
-    """The thread count the environment asks for (``SOMTORCH_THREADS``, then ``OMP_NUM_THREADS``)."""
+    """The thread count the environment asks for (``SOMTORCH_THREADS``, then ``OMP_NUM_THREADS``);
+    a value that is not a positive integer is ignored with one warning naming the variable."""
     for name in (ENV_THREADS, "OMP_NUM_THREADS"):
-        value = _positive_int(os.environ.get(name))
+        raw = os.environ.get(name)
+        value = _positive_int(raw)
         if value is not None:
             return value
+        if raw and raw.strip() and (name, raw) not in _warned:
+            _warned.add((name, raw))
+            logger.warning("%s=%r is not a positive number of threads; ignored", name, raw)
     return None
 
 

@@ -17,7 +17,7 @@ def restore_threads():
     torch.set_num_threads(before)
 
 
-def test_env_threads_precedence(monkeypatch):
+def test_env_threads_precedence(monkeypatch, caplog):
     monkeypatch.delenv(threads.ENV_THREADS, raising=False)
     monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
     assert threads.env_threads() is None
@@ -25,8 +25,12 @@ def test_env_threads_precedence(monkeypatch):
     assert threads.env_threads() == 3
     monkeypatch.setenv(threads.ENV_THREADS, "5")
     assert threads.env_threads() == 5
-    monkeypatch.setenv(threads.ENV_THREADS, "zero")  # not a count: ignored, the next source counts
-    assert threads.env_threads() == 3
+    monkeypatch.setenv(threads.ENV_THREADS, "zero")  # not a count: ignored (one warning), the next source counts
+    with caplog.at_level("WARNING", logger="somtorch.core.threads"):
+        assert threads.env_threads() == 3
+        assert threads.env_threads() == 3
+    assert [r.getMessage() for r in caplog.records] == [
+        "SOMTORCH_THREADS='zero' is not a positive number of threads; ignored"]
     monkeypatch.setenv("OMP_NUM_THREADS", "0")
     assert threads.env_threads() is None
 
