@@ -289,3 +289,16 @@ def test_online_rule_refuses_nan_weights_and_foreign_dtypes(kernel):
     assert not native.native_online(w, xs, c, lr, g)  # the torch path decides what NaN does
     assert torch.equal(w.nan_to_num(), before.nan_to_num())
     assert not native.native_online(torch.rand(1, 4, 3, dtype=torch.float16), xs.half(), c, lr, g)
+
+
+@pytest.mark.parametrize("ensemble", [1, 3])
+def test_online_fit_on_the_torch_path_agrees_with_the_compiled_loop(kernel, monkeypatch, ensemble):
+    # the torch path is what a CUDA device runs: it must give the same map up to rounding
+    from somtorch import SOM
+
+    x = torch.rand(2000, 3, generator=torch.Generator().manual_seed(3))
+    fast = SOM(4, 7, 3, ensemble=ensemble, seed=2).fit(x, mode="online", epochs=2, progress=False)
+    monkeypatch.setenv(native.ENV_SWITCH, "0")
+    slow = SOM(4, 7, 3, ensemble=ensemble, seed=2).fit(x, mode="online", epochs=2, progress=False)
+    assert torch.allclose(fast.weight, slow.weight, rtol=0, atol=1e-5)
+    assert not torch.equal(fast.weight, SOM(4, 7, 3, ensemble=ensemble, seed=2).initialize(x, "random").weight)
