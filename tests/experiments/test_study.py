@@ -162,6 +162,11 @@ def test_launchers_give_identical_results(launcher, basic_sweep, tmp_path):
     aggregate([basic_sweep], tmp_path / "a")
     aggregate([other], tmp_path / "b")
     assert (tmp_path / "a" / "results.csv").read_text() == (tmp_path / "b" / "results.csv").read_text()
+    if launcher == "joblib":  # two jobs side by side: each takes its share of the cores
+        from somtorch.core.threads import auto_threads
+
+        threads = {json.loads(m.read_text())["env"]["threads"] for m in _committed(other)}
+        assert threads == {auto_threads(jobs=2)}, threads
 
 
 def _committed(sweep: Path) -> list[Path]:
