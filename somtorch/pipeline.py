@@ -89,10 +89,15 @@ class _Timer:
             self.t[stage] = self.t.get(stage, 0.0) + time.perf_counter() - t0
 
 
+def _min_pixels(cfg: PipelineConfig) -> int:
+    """Valid pixels a map needs: one per SOM neuron, at least 16."""
+    return max(16, cfg.som.rows * cfg.som.cols if cfg.method in ("som", "minisom") else 16)
+
+
 def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
     """The degenerate-input checks of :func:`prepare` (see there)."""
     n = scene.n_valid
-    need = max(16, cfg.som.rows * cfg.som.cols if cfg.method in ("som", "minisom") else 16)
+    need = _min_pixels(cfg)
     if n < need:
         raise ValueError(f"scene {scene.name!r}: only {n} valid pixel(s); the segmentation needs at least {need} "
                          f"(one per SOM neuron, {cfg.som.rows}x{cfg.som.cols}); is the right disparity file loaded?")
@@ -148,9 +153,9 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
            timer: _Timer | None = None) -> list[MemberResult]:
     """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d)."""
     timer = timer or _Timer()
-    st = cfg.objects.map_stride
+    st = map_stride(scene, cfg)
     with timer("objects"):  # every member segments the same pixels: one context for all
-        disp, valid, labels, image, g, ocfg = _strided(scene, seg.labels, ground, cfg.objects)
+        disp, valid, labels, image, g, ocfg = _strided(scene, seg.labels, ground, replace(cfg.objects, map_stride=st))
         ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg, image)
         integral = ctx.integral if st == 1 else valid_integral(scene.valid)  # the reduction's: full size
     obj_mask, x_opt = None, None
@@ -183,6 +188,26 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
         log.warning("scene %s: %d of %d member(s) found no convincing object area; the whole map is kept "
                     "(flagged no_object)", scene.name, fallback, len(members))
     return members
+
+
+def map_stride(scene: Scene, cfg: PipelineConfig) -> int:
+    """The stride the object step uses on ``scene``: ``objects.map_stride``, or the largest smaller
+    one whose grid still holds as many valid pixels as the segmentation needs (a small map is read
+    whole; logged as a warning naming the setting)."""
+    s = cfg.objects.map_stride
+    if s == 1:
+        return 1
+    need = _min_pixels(cfg)
+    h, w = scene.valid.shape
+    t = min(s, max(h, w))
+    # a grid of -(-h // t) x -(-w // t) points cannot hold `need` valid pixels when it has fewer points
+    while t > 1 and ((-(-h // t)) * (-(-w // t)) < need or int(scene.valid[::t, ::t].sum()) < need):
+        t -= 1
+    if t < s:
+        log.warning("scene %s: objects.map_stride=%d leaves fewer than %d valid pixels on the grid the object step "
+                    "reads; it reads %s instead", scene.name, s, need,
+                    "every pixel" if t == 1 else f"every {t}th pixel")
+    return t
 
 
 def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg: AreaConfig):

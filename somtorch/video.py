@@ -28,7 +28,7 @@ import torch
 from .config import PipelineConfig, WarmStartConfig
 from .core import SOM
 from .disparity.scene import Scene
-from .pipeline import MemberResult, _Timer, detect, prepare
+from .pipeline import MemberResult, _Timer, detect, map_stride, prepare
 from .segmenters import Segmentation, _from_prototypes, run_segmenter
 from .tasks.ground import GroundPlane, fit_ground_plane
 from .tasks.segmentation import segment
@@ -119,7 +119,7 @@ class SequenceRunner:
             with timer("segment"):
                 # only the pixels the object step reads (every objects.map_stride-th in y and x):
                 # the frame's results are those of the full label map, at a quarter of the BMUs
-                grid = feats.subsample(cfg.objects.map_stride)
+                grid = feats.subsample(map_stride(scene, cfg))
                 seg.labels = segment(w, grid.x, grid.pixels, grid.shape)
         else:  # cold: exactly run_pipeline's segmenter
             seg = run_segmenter(feats, train, scene, usable, cfg, timer=timer)

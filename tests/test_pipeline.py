@@ -274,3 +274,19 @@ def test_a_map_that_varies_only_off_the_check_sample_is_usable():
         check_usable(scene_from_arrays(d, valid, name="flat"), check)
     d[1, 3] = 9.0  # not on the 4-pixel grid of the quick sample: the full check must see it
     check_usable(scene_from_arrays(d, valid, name="one"), check)
+
+
+def test_a_map_too_small_for_its_map_stride_is_read_whole_with_a_warning(motorcycle, caplog):
+    from dataclasses import replace
+
+    from somtorch.tasks.objects import AreaConfig
+
+    coarse = run_pipeline(motorcycle, replace(_cfg(ensemble=1), objects=AreaConfig(map_stride=100_000)),
+                          metrics=False)
+    assert "objects.map_stride=100000 leaves fewer than 28 valid pixels" in caplog.text  # 4 x 7 neurons
+    whole = run_pipeline(motorcycle, replace(_cfg(ensemble=1), objects=AreaConfig(map_stride=1)), metrics=False)
+    coarsest = [t for t in range(2, 200) if int(motorcycle.valid[::t, ::t].sum()) >= 28][-1]
+    same = run_pipeline(motorcycle, replace(_cfg(ensemble=1), objects=AreaConfig(map_stride=coarsest)),
+                        metrics=False)
+    assert coarse.members[0].kept[0].box == same.members[0].kept[0].box  # the coarsest stride that fits
+    assert coarsest > 1 and whole.members[0].kept  # the map itself is usable
