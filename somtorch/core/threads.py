@@ -211,6 +211,16 @@ _monitor = FreeCoreMonitor()
 _cores: int | None = None  # available_cores(), read once per process
 
 
+def _after_fork() -> None:
+    """A forked child has its own CPU time and may have another affinity: start over."""
+    global _monitor, _cores
+    _monitor, _cores = FreeCoreMonitor(), None
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork)
+
+
 def kernel_threads() -> int:
     """Threads for one native-kernel call: torch's count, capped by the cores other processes left free.
 

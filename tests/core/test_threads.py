@@ -127,3 +127,24 @@ def test_free_core_monitor_sees_a_busy_process():
             h.kill()
             h.wait()
     assert busy == 1, busy  # cores - 1 hogs leave one core
+
+
+def _fresh_in_child(q):
+    q.put((threads._monitor._last is None, threads._cores is None))
+
+
+def test_a_forked_child_starts_its_own_free_core_window():
+    import multiprocessing as mp
+
+    if "fork" not in mp.get_all_start_methods():
+        pytest.skip("no fork on this platform")
+    threads.kernel_threads()  # the parent has sampled (or at least computed its cores)
+    threads._monitor.free(threads.available_cores())
+    assert threads._monitor._last is not None
+    ctx = mp.get_context("fork")
+    q = ctx.Queue()
+    p = ctx.Process(target=_fresh_in_child, args=(q,))
+    p.start()
+    got = q.get(timeout=30)
+    p.join(timeout=30)
+    assert got == (True, True)
