@@ -4,7 +4,6 @@ or be refused with a one-line ``ValueError`` naming the problem — never a raw 
 
 from __future__ import annotations
 
-import dataclasses
 import random
 
 import pytest
