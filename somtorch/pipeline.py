@@ -119,12 +119,14 @@ def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
 
 
 def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
-            ground_fn: Callable[[torch.Tensor], GroundPlane | None] | None = None
+            ground_fn: Callable[[torch.Tensor], GroundPlane | None] | None = None, grid: int = 1
             ) -> tuple[torch.Tensor, GroundPlane | None, torch.Tensor, Features, Features]:
     """Stages clean, ground and features: ``(valid, ground, usable, features, training features)``.
 
     ``ground_fn(valid)``: where the ground plane comes from instead of a fit (a video re-uses the
-    previous frame's plane).
+    previous frame's plane). ``grid``: feature vectors only for the usable pixels on every
+    ``grid``-th row and column (a warm video frame, whose object step reads no other pixel; the
+    scaling then comes from those pixels); ``usable`` is always the whole map's.
 
     Raises:
         ValueError: before any work, for a map no segmentation can use: fewer valid pixels than
@@ -139,8 +141,12 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
         ground = ground_fn(valid) if ground_fn is not None else fit_ground_plane(scene.disparity, valid, cfg.ground)
     with timer("features"):
         usable = valid if ground is None else valid & ~ground.mask
+        rows = usable
+        if grid > 1:
+            rows = torch.zeros_like(usable)
+            rows[::grid, ::grid] = usable[::grid, ::grid]
         f = cfg.features
-        feats = make_features(scene.disparity, usable, normalize=f.normalize, d_weight=f.d_weight,
+        feats = make_features(scene.disparity, rows, normalize=f.normalize, d_weight=f.d_weight,
                               image=scene.image if f.color_weight > 0 else None, color_weight=f.color_weight)
         train = feats.subsample(cfg.features.train_stride)
         if len(train) == 0:

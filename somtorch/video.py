@@ -107,8 +107,15 @@ class SequenceRunner:
             g, reused[0] = self._ground_for(scene, valid)
             return g
 
-        valid, ground, usable, feats, train = prepare(scene, cfg, timer, ground_fn=ground_fn)
+        # a warm frame computes features only where its object step reads (every map_stride-th
+        # pixel), when its training pixels lie on that grid too
+        st = map_stride(scene, cfg)
+        grid = st if self.warm and self.som is not None and cfg.features.train_stride % st == 0 else 1
+        valid, ground, usable, feats, train = prepare(scene, cfg, timer, ground_fn=ground_fn, grid=grid)
         warm = self.warm and self.som is not None and self.som.dim == train.x.shape[-1]
+        if not warm and grid > 1:  # (features of another width than the map's: never with one config)
+            valid, ground, usable, feats, train = prepare(scene, cfg, timer, ground_fn=lambda v: ground)
+            grid = 1
         if warm:
             tc = cfg.train
             with timer("train"):
@@ -119,8 +126,8 @@ class SequenceRunner:
             with timer("segment"):
                 # only the pixels the object step reads (every objects.map_stride-th in y and x):
                 # the frame's results are those of the full label map, at a quarter of the BMUs
-                grid = feats.subsample(map_stride(scene, cfg))
-                seg.labels = segment(w, grid.x, grid.pixels, grid.shape)
+                on = feats if grid > 1 else feats.subsample(st)
+                seg.labels = segment(w, on.x, on.pixels, on.shape)
         else:  # cold: exactly run_pipeline's segmenter
             seg = run_segmenter(feats, train, scene, usable, cfg, timer=timer)
             self.som = seg.som

@@ -83,3 +83,20 @@ def test_a_warm_frame_labels_only_what_the_object_step_reads_with_the_same_resul
     for g, r in zip(got.members, want):
         assert [a.box for a in g.kept] == [a.box for a in r.kept]
         assert g.reduction.reduction_union == r.reduction.reduction_union
+
+
+def test_features_on_a_grid_keep_the_training_pixels_and_the_image_axes():
+    from somtorch.pipeline import prepare
+
+    cfg = with_overrides(PipelineConfig(), {"ensemble": 1})
+    frame = next(pan_sequence(_world(), 120, 90, 1))
+    _, _, usable, full, train_full = prepare(frame, cfg)
+    _, _, usable2, grid, train_grid = prepare(frame, cfg, grid=2)
+    assert torch.equal(usable, usable2)  # the map's usable pixels, whatever the grid
+    want = usable.clone()
+    want[1::2, :] = False
+    want[:, 1::2] = False
+    assert torch.equal(grid.mask, want) and len(grid) == int(want.sum())
+    assert torch.equal(train_full.pixels, train_grid.pixels)  # stride 10 lies on the 2-grid
+    on = want[full.pixels[:, 0], full.pixels[:, 1]]
+    assert torch.equal(full.x[on][:, :2], grid.x[:, :2])  # y, x scale with the image, not the pixels
