@@ -37,7 +37,7 @@ except ImportError:  # python benchmarks/bench_pipeline.py
     import common
 
 from somtorch.disparity.scene import Scene, scene_from_arrays
-from somtorch.pipeline import PipelineConfig, SOMConfig, run_pipeline
+from somtorch.pipeline import PipelineConfig, SOMConfig, run_pipeline, train_stride
 
 STAGE_ORDER = ("clean", "ground", "features", "train", "segment", "objects", "reduction")
 CORE_STAGES = ("train", "segment", "objects", "reduction")
@@ -188,8 +188,9 @@ def main(argv: list[str] | None = None) -> int:
          common.ms(min(r["wall"] for r in runs)),
          common.ms(max(r["wall"] for r in runs)), ""],
     ]
-    n_train = len(range(0, st.height, fc.train_stride)) * len(range(0, st.width, fc.train_stride))
-    print(f"\nTable 1: {st.width}x{st.height}, OR mode (train stride {fc.train_stride}, "
+    ts = train_stride(scene, cfg)  # features.train_stride counted on 640 x 480, scaled to this size
+    n_train = len(range(0, st.height, ts)) * len(range(0, st.width, ts))
+    print(f"\nTable 1: {st.width}x{st.height}, OR mode (train stride {ts}, "
           f"<= {n_train:,} train px; "
           f"all {n_valid:,} valid px segmented), {st.runs} runs")
     print(common.table(["stage", "median", "min", "max", "share of summed medians"], rows, align="lrrrr"))

@@ -75,6 +75,10 @@ class SceneCache:
     def members(self, overrides: dict[str, Any]) -> tuple[Any, list]:
         """``(ground plane, member results)`` of the base config with ``overrides``; the segmentation
         is computed once per upstream setting (features, ground, SOM, training)."""
+        from dataclasses import replace
+
+        import torch
+
         from somtorch.config import with_overrides
         from somtorch.pipeline import detect, prepare
         from somtorch.segmenters import run_segmenter
@@ -83,9 +87,13 @@ class SceneCache:
         up = _key({k: v for k, v in overrides.items() if k.split(".")[0] in UPSTREAM})
         if up not in self._seg:
             valid, ground, usable, feats, train = prepare(self.scene, cfg)
-            self._seg[up] = (ground, run_segmenter(feats, train, self.scene, usable, cfg))
+            seg = run_segmenter(feats, train, self.scene, usable, cfg)
+            # kept as int16 (a SOM has far fewer neurons): 30 members x 22 scenes x every upstream
+            # setting of the grid as int64 label maps outgrew 24 GiB
+            small = seg.labels.to(torch.int16) if int(seg.labels.max()) < 2 ** 15 else seg.labels
+            self._seg[up] = (ground, replace(seg, labels=small, som=None))  # (the object step reads no map)
         ground, seg = self._seg[up]
-        return ground, detect(self.scene, seg, ground, cfg)
+        return ground, detect(self.scene, replace(seg, labels=seg.labels.long()), ground, cfg)
 
     def score(self, overrides: dict[str, Any]) -> dict[str, Any]:
         from somtorch.evaluation import all_objects, ground_object_share

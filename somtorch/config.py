@@ -47,13 +47,19 @@ class FeatureConfig(Validated):
             every pixel vector (0 = off; needs the scene's image).
         speckle_frac: remove image-connected speckles of similar disparity smaller than this share
             of the pixels before anything else (OpenCV ``filterSpeckles``; 0 = off).
+        reference_pixels: the pipeline's strides (``train_stride``, ``objects.map_stride``,
+            ``objects.grow_stride``) are counted on an image of this many pixels (640 × 480); on
+            an image of ``n`` pixels each is multiplied by √(n / reference_pixels) and rounded (at
+            least 1), so the same scene at another resolution trains on as many pixels and its
+            object step reads as many (see :func:`scaled_stride`). 0 = strides in pixels as given
+            (the paper's reading).
     """
 
     _group: ClassVar[str] = "features"
     _constraints: ClassVar[dict[str, Any]] = {
         "normalize": Choice("somtorch.disparity.features:NORMALIZATIONS"),
         "d_weight": POSITIVE, "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
-        "speckle_frac": Interval(0, 1),
+        "speckle_frac": Interval(0, 1), "reference_pixels": Interval(0, None, integer=True),
     }
 
     normalize: str = "image"
@@ -61,6 +67,24 @@ class FeatureConfig(Validated):
     color_weight: float = 0.0
     train_stride: int = 10
     speckle_frac: float = 0.0
+    reference_pixels: int = 307_200
+
+    def scale(self, height: int, width: int) -> float:
+        """√(height · width / reference_pixels), at least 1 (a smaller image keeps the strides as
+        given); 1 with ``reference_pixels`` 0."""
+        if self.reference_pixels == 0:
+            return 1.0
+        return max(1.0, (height * width / self.reference_pixels) ** 0.5)
+
+
+def scaled_stride(stride: int, scale: float) -> int:
+    """``stride`` counted on the reference image, on an image ``scale`` times as large per side:
+    ``max(1, ⌊stride · scale + ½⌋)`` (a stride of 1 stays 1: "every pixel" is not a count).
+
+    >>> scaled_stride(10, 2.0), scaled_stride(2, 0.5), scaled_stride(1, 3.0)
+    (20, 1, 1)
+    """
+    return 1 if stride == 1 else max(1, int(stride * scale + 0.5))
 
 
 # ------------------------------------------------------------------------------------ step 1b: SOM
@@ -162,7 +186,11 @@ class GroundConfig(Validated):
         tol_px: … but at least this many px.
         min_inlier_frac: a plane needs this share of the valid pixels.
         min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
-            of the disparity range (a fronto-parallel wall has b ≈ 0).
+            of the disparity range: a floor runs from far (its horizon, disparity 0, at or above the
+            top row) to the nearest surface in view (the bottom row), so ``b · H`` reaches at least
+            the range (the floors and roads of the development scenes: 1.1–2.1); a seat, a bed, a
+            table top or a slanted wall spans a part of it (0.3–0.9 there), a fronto-parallel wall
+            none.
         max_top_frac: a plane covering more than this share of the valid pixels of the top third
             of the image is not ground (a wall or a slanted object).
         max_below_frac: a support surface hides what lies beneath it, so at most this share of the
@@ -173,8 +201,14 @@ class GroundConfig(Validated):
             ``slope_rows ×`` the image height above and below it, so the vertical surfaces that
             cross the plane's band (an object's base, legs) stay out of the mask (0 = off).
         iterations: RANSAC hypotheses.
-        sample: pixels drawn for RANSAC.
+        sample: pixels drawn for RANSAC (and, with ``constrained``, for the tests).
         seed: RANSAC seed (the result does not depend on the SOM seed).
+        constrained: the inlier, behind and top tests are constraints of the model: they are
+            estimated on a sample of the whole map for the hypotheses with the most inliers, and
+            the best hypothesis that passes them is refined and tested on the full map (``tries``
+            of them at most). Off: only the best hypothesis is tested, so a floor whose test
+            statistic lies near a threshold was found or refused by the luck of the seed.
+        tries: hypotheses passing the sampled tests that are tested on the full map, best first.
     """
 
     _group: ClassVar[str] = "ground"
@@ -182,19 +216,22 @@ class GroundConfig(Validated):
         "enabled": BOOL, "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_top_frac": FRACTION, "max_below_frac": FRACTION,
         "slope_rows": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
+        "constrained": BOOL, "tries": POSITIVE_INT,
     }
 
     enabled: bool = True
     tol_frac: float = 0.02
     tol_px: float = 0.5
     min_inlier_frac: float = 0.08
-    min_slope_frac: float = 0.25
+    min_slope_frac: float = 1.0
     max_top_frac: float = 0.15
     max_below_frac: float = 0.1
     slope_rows: float = 0.0
-    iterations: int = 200
+    iterations: int = 400
     sample: int = 5000
     seed: int = 0
+    constrained: bool = True
+    tries: int = 5
 
 
 # ------------------------------------------------------------------------------ step 1c: objects

@@ -21,7 +21,7 @@ from typing import Any
 import torch
 
 from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, PipelineConfig, ReductionConfig,
-                     SOMConfig, TrainConfig)
+                     SOMConfig, TrainConfig, scaled_stride)
 from .core import SOM
 from .disparity.features import Features, make_features
 from .disparity.filters import remove_speckles
@@ -125,8 +125,9 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
 
     ``ground_fn(valid)``: where the ground plane comes from instead of a fit (a video re-uses the
     previous frame's plane). ``grid``: feature vectors only for the usable pixels on every
-    ``grid``-th row and column (a warm video frame, whose object step reads no other pixel; the
-    scaling then comes from those pixels); ``usable`` is always the whole map's.
+    ``grid``-th row and column and on the training grid (a warm video frame, whose object step
+    reads no other pixel; the scaling then comes from those pixels); ``usable`` is always the whole
+    map's.
 
     Raises:
         ValueError: before any work, for a map no segmentation can use: fewer valid pixels than
@@ -142,16 +143,19 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     with timer("features"):
         usable = valid if ground is None else valid & ~ground.mask
         rows = usable
-        if grid > 1:
+        stride = train_stride(scene, cfg)
+        if grid > 1:  # the grid's pixels and the training pixels
             rows = torch.zeros_like(usable)
             rows[::grid, ::grid] = usable[::grid, ::grid]
+            rows[::stride, ::stride] = usable[::stride, ::stride]
         f = cfg.features
         feats = make_features(scene.disparity, rows, normalize=f.normalize, d_weight=f.d_weight,
                               image=scene.image if f.color_weight > 0 else None, color_weight=f.color_weight)
-        train = feats.subsample(cfg.features.train_stride)
+        train = feats.subsample(stride)
         if len(train) == 0:
-            raise ValueError(f"features.train_stride={cfg.features.train_stride} leaves no valid pixel of "
-                             f"scene {scene.name!r} to train on; use a smaller stride")
+            raise ValueError(f"features.train_stride={cfg.features.train_stride} (every {stride}th pixel at "
+                             f"{scene.width}x{scene.height}) leaves no valid pixel of scene {scene.name!r} to "
+                             "train on; use a smaller stride")
     return valid, ground, usable, feats, train
 
 
@@ -160,8 +164,11 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
     """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d)."""
     timer = timer or _Timer()
     st = map_stride(scene, cfg)
+    h, w = scene.disparity.shape
     with timer("objects"):  # every member segments the same pixels: one context for all
-        disp, valid, labels, image, g, ocfg = _strided(scene, seg.labels, ground, replace(cfg.objects, map_stride=st))
+        grow = scaled_stride(cfg.objects.grow_stride, cfg.features.scale(h, w))
+        disp, valid, labels, image, g, ocfg = _strided(scene, seg.labels, ground,
+                                                       replace(cfg.objects, map_stride=st, grow_stride=grow))
         ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg, image)
         integral = ctx.integral if st == 1 else valid_integral(scene.valid)  # the reduction's: full size
     obj_mask, x_opt = None, None
@@ -170,7 +177,6 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
         x_opt = optimal_reduction(obj_mask, scene.valid, integral)  # the same for every member
     r = cfg.reduction
     members = []
-    h, w = scene.disparity.shape
     for e in range(seg.labels.shape[0]):
         with timer("objects"):
             found = find_objects(labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, ocfg,
@@ -196,11 +202,18 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
     return members
 
 
+def train_stride(scene: Scene, cfg: PipelineConfig) -> int:
+    """The training stride on ``scene``: ``features.train_stride`` scaled to its resolution
+    (:meth:`~somtorch.config.FeatureConfig.scale`)."""
+    return scaled_stride(cfg.features.train_stride, cfg.features.scale(*scene.valid.shape))
+
+
 def map_stride(scene: Scene, cfg: PipelineConfig) -> int:
-    """The stride the object step uses on ``scene``: ``objects.map_stride``, or the largest smaller
-    one whose grid still holds as many valid pixels as the segmentation needs (a small map is read
-    whole; logged as a warning naming the setting)."""
-    s = cfg.objects.map_stride
+    """The stride the object step uses on ``scene``: ``objects.map_stride`` scaled to its
+    resolution (:meth:`~somtorch.config.FeatureConfig.scale`), or the largest smaller one whose
+    grid still holds as many valid pixels as the segmentation needs (a small map is read whole;
+    logged as a warning naming the setting)."""
+    s = scaled_stride(cfg.objects.map_stride, cfg.features.scale(*scene.valid.shape))
     if s == 1:
         return 1
     need = _min_pixels(cfg)
@@ -210,8 +223,9 @@ def map_stride(scene: Scene, cfg: PipelineConfig) -> int:
     while t > 1 and ((-(-h // t)) * (-(-w // t)) < need or int(scene.valid[::t, ::t].sum()) < need):
         t -= 1
     if t < s:
-        log.warning("scene %s: objects.map_stride=%d leaves fewer than %d valid pixels on the grid the object step "
-                    "reads; it reads %s instead", scene.name, s, need,
+        log.warning("scene %s: objects.map_stride=%d (every %dth pixel at %dx%d) leaves fewer than %d valid pixels "
+                    "on the grid the object step reads; it reads %s instead", scene.name, cfg.objects.map_stride, s,
+                    w, h, need,
                     "every pixel" if t == 1 else f"every {t}th pixel")
     return t
 

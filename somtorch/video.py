@@ -109,9 +109,9 @@ class SequenceRunner:
             return g
 
         # a warm frame computes features only where its object step reads (every map_stride-th
-        # pixel), when its training pixels lie on that grid too
+        # pixel) and where it trains
         st = map_stride(scene, cfg)
-        grid = st if self.warm and self.som is not None and cfg.features.train_stride % st == 0 else 1
+        grid = st if self.warm and self.som is not None else 1
         valid, ground, usable, feats, train = prepare(scene, cfg, timer, ground_fn=ground_fn, grid=grid)
         warm = self.warm and self.som is not None and self.som.dim == train.x.shape[-1]
         if not warm and grid > 1:  # (features of another width than the map's: never with one config)

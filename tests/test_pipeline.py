@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from somtorch.disparity.scene import load_scene
-from somtorch.pipeline import PipelineConfig, SOMConfig, TrainConfig, run_pipeline
+from somtorch.pipeline import PipelineConfig, SOMConfig, TrainConfig, run_pipeline, train_stride
 from somtorch.tasks.reduction import reduce_map
 from somtorch.tasks.scoring import Score
 
@@ -63,7 +63,8 @@ def test_labels_cover_exactly_the_segmented_pixels(motorcycle, result):
         assert torch.equal(lab >= 0, segmented)
         assert int(lab.max()) < 28
     assert len(result.train_features) <= len(feats)
-    assert result.train_features.stride == PipelineConfig().features.train_stride
+    # the training stride is counted on a 640 x 480 image: the 741 x 497 Motorcycle trains on every 11th pixel
+    assert result.train_features.stride == train_stride(motorcycle, PipelineConfig()) == 11
 
 
 def test_reduction_of_every_member_is_that_of_its_kept_boxes(motorcycle, result):
@@ -281,12 +282,37 @@ def test_a_map_too_small_for_its_map_stride_is_read_whole_with_a_warning(motorcy
 
     from somtorch.tasks.objects import AreaConfig
 
-    coarse = run_pipeline(motorcycle, replace(_cfg(ensemble=1), objects=AreaConfig(map_stride=100_000)),
-                          metrics=False)
-    assert "objects.map_stride=100000 leaves fewer than 28 valid pixels" in caplog.text  # 4 x 7 neurons
-    whole = run_pipeline(motorcycle, replace(_cfg(ensemble=1), objects=AreaConfig(map_stride=1)), metrics=False)
+    base = _cfg(ensemble=1)
+    base = replace(base, features=replace(base.features, reference_pixels=0))  # strides in pixels as given
+    coarse = run_pipeline(motorcycle, replace(base, objects=AreaConfig(map_stride=100_000)), metrics=False)
+    assert f"objects.map_stride=100000 (every 100000th pixel at {motorcycle.width}x{motorcycle.height}) leaves " \
+        "fewer than 28 valid pixels" in caplog.text  # 4 x 7 neurons
+    whole = run_pipeline(motorcycle, replace(base, objects=AreaConfig(map_stride=1)), metrics=False)
     coarsest = [t for t in range(2, 200) if int(motorcycle.valid[::t, ::t].sum()) >= 28][-1]
-    same = run_pipeline(motorcycle, replace(_cfg(ensemble=1), objects=AreaConfig(map_stride=coarsest)),
-                        metrics=False)
+    same = run_pipeline(motorcycle, replace(base, objects=AreaConfig(map_stride=coarsest)), metrics=False)
     assert coarse.members[0].kept[0].box == same.members[0].kept[0].box  # the coarsest stride that fits
     assert coarsest > 1 and whole.members[0].kept  # the map itself is usable
+
+
+def test_strides_scale_with_the_resolution_so_a_resampled_map_trains_on_as_many_pixels(motorcycle):
+    from dataclasses import replace
+
+    from somtorch.config import scaled_stride
+    from somtorch.disparity.resize import resize_scene
+    from somtorch.pipeline import map_stride
+
+    cfg = PipelineConfig()
+    big = resize_scene(motorcycle, motorcycle.width * 2, motorcycle.height * 2)
+    assert train_stride(big, cfg) == 2 * train_stride(motorcycle, cfg) or \
+        abs(train_stride(big, cfg) - 2 * train_stride(motorcycle, cfg)) <= 1
+    assert map_stride(big, cfg) == scaled_stride(cfg.objects.map_stride, cfg.features.scale(*big.valid.shape)) == 4
+    # training sets of the same size (within the rounding of the stride)
+    n_small = int(motorcycle.valid[::train_stride(motorcycle, cfg), ::train_stride(motorcycle, cfg)].sum())
+    n_big = int(big.valid[::train_stride(big, cfg), ::train_stride(big, cfg)].sum())
+    assert 0.8 < n_big / n_small < 1.25
+    # a smaller image keeps the strides as given; reference_pixels 0 counts strides in pixels
+    small = resize_scene(motorcycle, motorcycle.width // 2, motorcycle.height // 2)
+    assert train_stride(small, cfg) == cfg.features.train_stride and map_stride(small, cfg) == cfg.objects.map_stride
+    raw = replace(cfg, features=replace(cfg.features, reference_pixels=0))
+    assert train_stride(big, raw) == cfg.features.train_stride and map_stride(big, raw) == cfg.objects.map_stride
+    assert scaled_stride(1, 5.0) == 1  # NOR (every pixel) stays every pixel

@@ -6,7 +6,11 @@ supporting floor or road is the plane whose disparity grows towards the bottom o
 the largest disparities of the map, so the paper's "nearest area" rule picks it instead of the
 object standing on it. :func:`fit_ground_plane` finds it with RANSAC on a subsample of the lower
 image half and refines it by least squares on the inliers; a plane that does not look like ground
-(too flat in y, tilted more in x than in y, or too few inliers) is rejected and None returned.
+(too flat in y, tilted more in x than in y, too few inliers, the scene behind it, or filling the
+top of the image) is rejected and None returned. With ``constrained`` (the default) those tests are
+constraints of the RANSAC model: estimated on a sample of the whole map for every strong
+hypothesis, so the best plane that satisfies them is found instead of the best plane being
+refused (which made the verdict on a real floor near a threshold depend on the seed).
 """
 
 from __future__ import annotations
@@ -92,9 +96,52 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     plausible = good & (coef[:, 1] >= min_b) & (coef[:, 0].abs() <= coef[:, 1] * w / h)
     if not bool(plausible.any()):
         return None
-    pred = coef[:, 0:1] * pts[None, :, 0] + coef[:, 1:2] * pts[None, :, 1] + coef[:, 2:3]
-    score = ((pred - pts[None, :, 2]).abs() < tol).sum(1).masked_fill(~plausible, -1)
-    best = coef[int(score.argmax())]
+    # inlier counts of every hypothesis in float32 (disparities of a few hundred px, a band of at
+    # least tol_px: far above its rounding), one (I, N) product
+    pf = torch.cat([pts[:, :2], torch.ones_like(pts[:, :1])], 1).float()  # (N, 3)
+    resid = (coef.float() @ pf.T - pts[None, :, 2].float()).abs_()
+    score = (resid < tol).sum(1).masked_fill(~plausible, -1)
+    if cfg.constrained:
+        # the support-surface tests are constraints of the model, checked on a sample of the whole
+        # map for every hypothesis: the best plane that passes them, not the best plane, is tested on the full map (a single
+        # best hypothesis near a test's threshold made the verdict a lottery of the RANSAC seed)
+        allyx = ok.nonzero()
+        pa = allyx[torch.randint(allyx.shape[0], (min(cfg.sample, allyx.shape[0]),), generator=g)]
+        q = torch.stack([pa[:, 1].double(), pa[:, 0].double(), disparity[pa[:, 0], pa[:, 1]].double()], 1)
+        score = score.masked_fill(~_passes_sampled(coef, q, tol, h, cfg), -1)
+    order = torch.argsort(score, descending=True, stable=True)
+    for i in order[:cfg.tries if cfg.constrained else 1].tolist():
+        if int(score[i]) < 0:
+            break
+        plane = _verified(coef[i], pts, disparity, ok, n_valid, tol, min_b, cfg)
+        if plane is not None:
+            return plane
+    return None
+
+
+def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, cfg: GroundConfig) -> torch.Tensor:
+    """Which hypotheses ``coef`` ``(I, 3)`` pass the inlier, behind and top tests on the sample ``q``
+    ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated)."""
+    qf = torch.cat([q[:, :2], torch.ones_like(q[:, :1])], 1).float()  # float32, as the inlier counts
+    pred = coef.float() @ qf.T  # (I, N)
+    d = q[None, :, 2].float()
+    inl = (pred - d).abs() < tol
+    ok = inl.float().mean(1) >= cfg.min_inlier_frac
+    if cfg.max_below_frac < 1.0:
+        seen = pred > tol
+        behind = seen & (d < pred - tol)
+        ok &= behind.sum(1) <= cfg.max_below_frac * seen.sum(1).clamp_min(1)
+    top = q[:, 1] < h // 3
+    if bool(top.any()):
+        ok &= inl[:, top].float().mean(1) <= cfg.max_top_frac
+    return ok
+
+
+def _verified(best: torch.Tensor, pts: torch.Tensor, disparity: torch.Tensor, ok: torch.Tensor, n_valid: int,
+              tol: float, min_b: float, cfg: GroundConfig) -> GroundPlane | None:
+    """Hypothesis ``best`` refined by least squares on its inliers among ``pts`` and tested on the
+    full map (slope, inlier share, scene behind it, inliers in the top third), or None."""
+    h, w = disparity.shape
     # refine by least squares on the inliers of the lower half, then recompute on the full map
     inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
     if int(inl.sum()) >= 3:
