@@ -204,8 +204,8 @@ class GroundConfig(Validated):
         sample: pixels drawn for RANSAC (and, with ``constrained``, for the tests).
         seed: RANSAC seed (the result does not depend on the SOM seed).
         constrained: the inlier, behind and top tests are constraints of the model: they are
-            estimated on a sample of the whole map for the hypotheses with the most inliers, and
-            the best hypothesis that passes them is refined and tested on the full map (``tries``
+            estimated on a sample of the whole map for every hypothesis, and the best hypothesis
+            that passes them is refined and tested on the full map (``tries``
             of them at most). Off: only the best hypothesis is tested, so a floor whose test
             statistic lies near a threshold was found or refused by the luck of the seed.
         tries: hypotheses passing the sampled tests that are tested on the full map, best first.

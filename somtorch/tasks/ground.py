@@ -97,14 +97,13 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     if not bool(plausible.any()):
         return None
     # inlier counts of every hypothesis in float32 (disparities of a few hundred px, a band of at
-    # least tol_px: far above its rounding), one (I, N) product
-    pf = torch.cat([pts[:, :2], torch.ones_like(pts[:, :1])], 1).float()  # (N, 3)
-    resid = (coef.float() @ pf.T - pts[None, :, 2].float()).abs_()
-    score = (resid < tol).sum(1).masked_fill(~plausible, -1)
+    # least tol_px: far above its rounding); element-wise, so the same bits at any thread count
+    score = ((_predict(coef, pts) - pts[None, :, 2].float()).abs_() < tol).sum(1).masked_fill(~plausible, -1)
     if cfg.constrained:
         # the support-surface tests are constraints of the model, checked on a sample of the whole
-        # map for every hypothesis: the best plane that passes them, not the best plane, is tested on the full map (a single
-        # best hypothesis near a test's threshold made the verdict a lottery of the RANSAC seed)
+        # map for every hypothesis: the best plane that passes them, not the best plane, is tested
+        # on the full map (a single best hypothesis near a test's threshold made the verdict a
+        # lottery of the RANSAC seed)
         allyx = ok.nonzero()
         pa = allyx[torch.randint(allyx.shape[0], (min(cfg.sample, allyx.shape[0]),), generator=g)]
         q = torch.stack([pa[:, 1].double(), pa[:, 0].double(), disparity[pa[:, 0], pa[:, 1]].double()], 1)
@@ -119,11 +118,18 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     return None
 
 
+def _predict(coef: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:
+    """Disparity of every hypothesis ``coef`` ``(I, 3)`` at every point ``pts`` ``(N, 3)`` rows
+    (x, y, d): ``(I, N)`` float32."""
+    c = coef.float()
+    x, y = pts[None, :, 0].float(), pts[None, :, 1].float()
+    return c[:, 0:1] * x + c[:, 1:2] * y + c[:, 2:3]
+
+
 def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, cfg: GroundConfig) -> torch.Tensor:
     """Which hypotheses ``coef`` ``(I, 3)`` pass the inlier, behind and top tests on the sample ``q``
     ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated)."""
-    qf = torch.cat([q[:, :2], torch.ones_like(q[:, :1])], 1).float()  # float32, as the inlier counts
-    pred = coef.float() @ qf.T  # (I, N)
+    pred = _predict(coef, q)  # (I, N)
     d = q[None, :, 2].float()
     inl = (pred - d).abs() < tol
     ok = inl.float().mean(1) >= cfg.min_inlier_frac

@@ -93,3 +93,19 @@ def test_a_real_floor_near_a_threshold_is_found_whatever_the_ransac_seed(shared_
     assert all(g is not None for g in found)
     assert max(g.inlier_frac for g in found) - min(g.inlier_frac for g in found) < 0.03
     assert all(0.1 < g.b < 0.15 for g in found)  # the same floor (0.125 px per row)
+
+
+def test_the_plane_has_the_same_bits_at_one_and_two_threads():
+    ys = torch.arange(H, dtype=torch.float32)[:, None].expand(H, W)
+    d = (_floor() + 0.3 * torch.sin(ys * 0.7)).contiguous()  # a floor with ripples: many near-band pixels
+    valid = torch.ones(H, W, dtype=torch.bool)
+    before = torch.get_num_threads()
+    try:
+        planes = []
+        for n in (1, 2):
+            torch.set_num_threads(n)
+            g = fit_ground_plane(d, valid, GroundConfig())
+            planes.append((g.a, g.b, g.c, g.mask.clone()))
+    finally:
+        torch.set_num_threads(before)
+    assert planes[0][:3] == planes[1][:3] and torch.equal(planes[0][3], planes[1][3])
