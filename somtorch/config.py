@@ -48,11 +48,8 @@ class FeatureConfig(Validated):
         speckle_frac: remove image-connected speckles of similar disparity smaller than this share
             of the pixels before anything else (OpenCV ``filterSpeckles``; 0 = off).
         reference_pixels: the pipeline's strides (``train_stride``, ``objects.map_stride``,
-            ``objects.grow_stride``) are counted on an image of this many pixels (640 × 480); on
-            an image of ``n`` pixels each is multiplied by √(n / reference_pixels) and rounded (at
-            least 1), so the same scene at another resolution trains on as many pixels and its
-            object step reads as many (see :func:`scaled_stride`). 0 = strides in pixels as given
-            (the paper's reading).
+            ``objects.grow_stride``) are counted on an image of this many pixels (640 × 480), see
+            :meth:`stride_at`; 0 = strides in pixels as given (the paper's reading).
     """
 
     _group: ClassVar[str] = "features"
@@ -69,22 +66,18 @@ class FeatureConfig(Validated):
     speckle_frac: float = 0.0
     reference_pixels: int = 307_200
 
-    def scale(self, height: int, width: int) -> float:
-        """√(height · width / reference_pixels), at least 1 (a smaller image keeps the strides as
-        given); 1 with ``reference_pixels`` 0."""
-        if self.reference_pixels == 0:
-            return 1.0
-        return max(1.0, (height * width / self.reference_pixels) ** 0.5)
+    def stride_at(self, stride: int, height: int, width: int) -> int:
+        """``stride`` (counted on ``reference_pixels``) on a ``height × width`` image: times
+        s = √(height · width / reference_pixels) when s > 1, rounded (a smaller image keeps it; a
+        stride of 1, "every pixel", stays 1), so the same scene at a higher resolution trains on
+        as many pixels and its object step reads as many.
 
-
-def scaled_stride(stride: int, scale: float) -> int:
-    """``stride`` counted on the reference image, on an image ``scale`` times as large per side:
-    ``max(1, ⌊stride · scale + ½⌋)`` (a stride of 1 stays 1: "every pixel" is not a count).
-
-    >>> scaled_stride(10, 2.0), scaled_stride(2, 0.5), scaled_stride(1, 3.0)
-    (20, 1, 1)
-    """
-    return 1 if stride == 1 else max(1, int(stride * scale + 0.5))
+        >>> f = FeatureConfig()
+        >>> f.stride_at(10, 960, 1280), f.stride_at(2, 240, 320), f.stride_at(1, 960, 1280)
+        (20, 2, 1)
+        """
+        scale = 1.0 if self.reference_pixels == 0 else (height * width / self.reference_pixels) ** 0.5
+        return 1 if stride == 1 else max(1, int(stride * max(scale, 1.0) + 0.5))
 
 
 # ------------------------------------------------------------------------------------ step 1b: SOM
@@ -186,11 +179,8 @@ class GroundConfig(Validated):
         tol_px: … but at least this many px.
         min_inlier_frac: a plane needs this share of the valid pixels.
         min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
-            of the disparity range: a floor runs from far (its horizon, disparity 0, at or above the
-            top row) to the nearest surface in view (the bottom row), so ``b · H`` reaches at least
-            the range (the floors and roads of the development scenes: 1.1–2.1); a seat, a bed, a
-            table top or a slanted wall spans a part of it (0.3–0.9 there), a fronto-parallel wall
-            none.
+            of the disparity range: a floor spans it, from its horizon to the nearest thing in view;
+            a seat, a bed, a table top or a slanted wall spans a part (docs/tuned_constants.md).
         max_top_frac: a plane covering more than this share of the valid pixels of the top third
             of the image is not ground (a wall or a slanted object).
         max_below_frac: a support surface hides what lies beneath it, so at most this share of the
@@ -203,12 +193,10 @@ class GroundConfig(Validated):
         iterations: RANSAC hypotheses.
         sample: pixels drawn for RANSAC (and, with ``constrained``, for the tests).
         seed: RANSAC seed (the result does not depend on the SOM seed).
-        constrained: the inlier, behind and top tests are constraints of the model: they are
-            estimated on a sample of the whole map for every hypothesis, and the best hypothesis
-            that passes them is refined and tested on the full map (``tries``
-            of them at most). Off: only the best hypothesis is tested, so a floor whose test
-            statistic lies near a threshold was found or refused by the luck of the seed.
-        tries: hypotheses passing the sampled tests that are tested on the full map, best first.
+        constrained: the inlier, behind and top tests are RANSAC constraints, estimated on a
+            sample for every hypothesis; the best passing one is tested on the full map (off: only
+            the best hypothesis is, so a floor near a threshold depended on the seed).
+        tries: passing hypotheses tested on the full map at most, best first.
     """
 
     _group: ClassVar[str] = "ground"

@@ -21,7 +21,7 @@ from typing import Any
 import torch
 
 from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, PipelineConfig, ReductionConfig,
-                     SOMConfig, TrainConfig, scaled_stride)
+                     SOMConfig, TrainConfig)
 from .core import SOM
 from .disparity.features import Features, make_features
 from .disparity.filters import remove_speckles
@@ -166,7 +166,7 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
     st = map_stride(scene, cfg)
     h, w = scene.disparity.shape
     with timer("objects"):  # every member segments the same pixels: one context for all
-        grow = scaled_stride(cfg.objects.grow_stride, cfg.features.scale(h, w))
+        grow = cfg.features.stride_at(cfg.objects.grow_stride, h, w)
         disp, valid, labels, image, g, ocfg = _strided(scene, seg.labels, ground,
                                                        replace(cfg.objects, map_stride=st, grow_stride=grow))
         ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg, image)
@@ -203,17 +203,17 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
 
 
 def train_stride(scene: Scene, cfg: PipelineConfig) -> int:
-    """The training stride on ``scene``: ``features.train_stride`` scaled to its resolution
-    (:meth:`~somtorch.config.FeatureConfig.scale`)."""
-    return scaled_stride(cfg.features.train_stride, cfg.features.scale(*scene.valid.shape))
+    """The training stride on ``scene``: ``features.train_stride`` at its resolution
+    (:meth:`~somtorch.config.FeatureConfig.stride_at`)."""
+    return cfg.features.stride_at(cfg.features.train_stride, *scene.valid.shape)
 
 
 def map_stride(scene: Scene, cfg: PipelineConfig) -> int:
-    """The stride the object step uses on ``scene``: ``objects.map_stride`` scaled to its
-    resolution (:meth:`~somtorch.config.FeatureConfig.scale`), or the largest smaller one whose
+    """The stride the object step uses on ``scene``: ``objects.map_stride`` at its resolution
+    (:meth:`~somtorch.config.FeatureConfig.stride_at`), or the largest smaller one whose
     grid still holds as many valid pixels as the segmentation needs (a small map is read whole;
     logged as a warning naming the setting)."""
-    s = scaled_stride(cfg.objects.map_stride, cfg.features.scale(*scene.valid.shape))
+    s = cfg.features.stride_at(cfg.objects.map_stride, *scene.valid.shape)
     if s == 1:
         return 1
     need = _min_pixels(cfg)

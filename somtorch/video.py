@@ -10,9 +10,10 @@ A scene changes little from one frame to the next, so :class:`SequenceRunner` ke
   ``ground_every`` frames;
 * **buffers**: the camera and the config are the sequence's; the SOM's grid and generators live
   across frames;
-* **work nobody reads**: a warm frame computes features for and labels only the pixels the object
-  step reads (every ``objects.map_stride``-th in y and x); the training pixels and the y, x scaling
-  are the full map's, the disparity scaling comes from the sampled pixels.
+* **work nobody reads**: a warm frame computes features for the pixels the object step reads
+  (every ``map_stride``-th in y and x, :func:`~somtorch.pipeline.map_stride`) and the training
+  pixels, and labels those only; the y, x scaling is the full map's, the disparity scaling comes
+  from those pixels.
 
 :func:`iter_sequence` is the library iterator; ``python -m experiments.video`` the Hydra
 experiment (a synthetic camera motion over a real scene when no sequence is given), and
@@ -125,8 +126,8 @@ class SequenceRunner:
             w = self.som.weight.detach()
             seg: Segmentation = _from_prototypes(w, feats, self.som.grid_d2, self.som, self.som.seeds)
             with timer("segment"):
-                # only the pixels the object step reads (every objects.map_stride-th in y and x),
-                # a quarter of the BMUs; the object step never reads the others
+                # only the pixels the object step reads (every st-th in y and x, 1/st² of the
+                # BMUs) and the training ones; the object step never reads the others
                 on = feats if grid > 1 else feats.subsample(st)
                 seg.labels = segment(w, on.x, on.pixels, on.shape)
         else:  # cold: exactly run_pipeline's segmenter

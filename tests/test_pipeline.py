@@ -297,7 +297,6 @@ def test_a_map_too_small_for_its_map_stride_is_read_whole_with_a_warning(motorcy
 def test_strides_scale_with_the_resolution_so_a_resampled_map_trains_on_as_many_pixels(motorcycle):
     from dataclasses import replace
 
-    from somtorch.config import scaled_stride
     from somtorch.disparity.resize import resize_scene
     from somtorch.pipeline import map_stride
 
@@ -305,7 +304,7 @@ def test_strides_scale_with_the_resolution_so_a_resampled_map_trains_on_as_many_
     big = resize_scene(motorcycle, motorcycle.width * 2, motorcycle.height * 2)
     assert train_stride(big, cfg) == 2 * train_stride(motorcycle, cfg) or \
         abs(train_stride(big, cfg) - 2 * train_stride(motorcycle, cfg)) <= 1
-    assert map_stride(big, cfg) == scaled_stride(cfg.objects.map_stride, cfg.features.scale(*big.valid.shape)) == 4
+    assert map_stride(big, cfg) == cfg.features.stride_at(cfg.objects.map_stride, *big.valid.shape) == 4
     # training sets of the same size (within the rounding of the stride)
     n_small = int(motorcycle.valid[::train_stride(motorcycle, cfg), ::train_stride(motorcycle, cfg)].sum())
     n_big = int(big.valid[::train_stride(big, cfg), ::train_stride(big, cfg)].sum())
@@ -315,4 +314,4 @@ def test_strides_scale_with_the_resolution_so_a_resampled_map_trains_on_as_many_
     assert train_stride(small, cfg) == cfg.features.train_stride and map_stride(small, cfg) == cfg.objects.map_stride
     raw = replace(cfg, features=replace(cfg.features, reference_pixels=0))
     assert train_stride(big, raw) == cfg.features.train_stride and map_stride(big, raw) == cfg.objects.map_stride
-    assert scaled_stride(1, 5.0) == 1  # NOR (every pixel) stays every pixel
+    assert cfg.features.stride_at(1, 5 * 480, 5 * 640) == 1  # NOR (every pixel) stays every pixel
