@@ -29,7 +29,11 @@ class SceneSpec:
     ``junk``: a synthetic failure class added to the map (see :func:`add_junk`): ``"border"`` (a
     band of speckles along the top and left borders at the main object's disparity, as SGBM leaves
     where the other view has no match), ``"specks"`` (isolated 2×2 specks near the object, also at
-    its disparity) or ``"resample:F"`` (the map resampled by the factor F).
+    its disparity), ``"pole"`` (a thin pole in front of the object, occluding it: the issue's
+    traffic-light pole; 1.5 % of the width, 1.25 × the object's 95th-percentile disparity, from
+    half-way above the object to the bottom row, a third of the way across it), ``"flip"`` (the
+    mirrored scene: a check that the rule has no left/right bias) or ``"resample:F"`` (the map
+    resampled by the factor F).
     """
 
     name: str
@@ -124,6 +128,10 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
         f = float(kind.split(":", 1)[1])
         out = resize_scene(scene, max(8, round(scene.width * f)), max(8, round(scene.height * f)))
         return dataclasses.replace(out, name=f"{scene.name}+{kind}")
+    if kind == "flip":  # the mirrored scene (a mirrored world is a valid world; the camera is dropped)
+        flip = {f: getattr(scene, f).flip(-1) for f in ("disparity", "valid", "image", "objects")
+                if getattr(scene, f) is not None}
+        return dataclasses.replace(scene, **flip, camera=None, name=f"{scene.name}+{kind}")
     obj = scene.main_object_mask & scene.valid
     d_obj = float(scene.disparity[obj].median())
     h, w = scene.disparity.shape
@@ -142,8 +150,19 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
         xx = torch.randint(max(0, x0 - mx), min(w - 2, x1 + mx), (n,), generator=g)
         for y, x in zip(yy.tolist(), xx.tolist()):
             junk[y:y + 2, x:x + 2] = True
+    elif kind == "pole":  # a thin pole in front of the object (it occludes what it crosses)
+        ys, xs = obj.nonzero(as_tuple=True)
+        x0, x1 = int(xs.min()), int(xs.max())
+        pw = max(2, round(0.015 * w))
+        px = x0 + (x1 - x0) // 3
+        junk[int(ys.min()) // 2:, px:px + pw] = True
+        d_near = float(torch.quantile(scene.disparity[obj].double()[::max(1, int(obj.sum()) // 20000)], 0.95))
+        disparity = torch.where(junk, 1.25 * d_near, scene.disparity)
+        objects = torch.where(junk, 0, scene.objects)
+        return dataclasses.replace(scene, disparity=disparity, valid=scene.valid | junk, objects=objects,
+                                   name=f"{scene.name}+{kind}")
     else:
-        raise ValueError(f"unknown junk kind {kind!r}: border, specks or resample:F")
+        raise ValueError(f"unknown junk kind {kind!r}: border, specks, pole, flip or resample:F")
     junk &= ~obj
     disparity = torch.where(junk, d_obj, scene.disparity)
     return dataclasses.replace(scene, disparity=disparity, valid=scene.valid | junk,

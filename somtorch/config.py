@@ -253,6 +253,10 @@ class AreaConfig(Validated):
             matching artefact (SGBM streaks on a textureless wall), not an object's outline. Edges:
             Canny on the left image (thresholds 0.66 / 1.33 × its median), dilated by 0.5 % of the
             image diagonal. 0 = off; no effect without an image.
+        facing_rank: an area's salience is multiplied by cos θ ** facing_rank, θ the tilt of its
+            least-squares disparity plane from the line of sight (principal point at the image
+            centre, focal length = the image width): a side wall or floor receding to its
+            vanishing point (cos θ ≈ 0) is not an obstacle's face. 0 = off.
         min_contrast: salient: minimum contrast as a share of the disparity spread.
         max_area_frac, min_area_frac: size limits as shares of the segmented pixels.
         max_areas: how many areas are kept at most.
@@ -295,7 +299,7 @@ class AreaConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice("somtorch.tasks.objects:LINKS"),
         "spread": Choice("somtorch.tasks.objects:SPREADS"), "min_boundary": NON_NEGATIVE,
-        "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "edge_rank": NON_NEGATIVE, "grow": BOOL, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
+        "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "edge_rank": NON_NEGATIVE, "facing_rank": NON_NEGATIVE, "grow": BOOL, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
@@ -317,6 +321,7 @@ class AreaConfig(Validated):
     size_power: float = 0.25
     color_rank: float = 0.0
     edge_rank: float = 0.0
+    facing_rank: float = 0.0
     grow: bool = False
     grow_stride: int = 2
     map_stride: int = 2

@@ -51,6 +51,8 @@ class NeuronStats:
         perimeter: boundary length of each segment with other segments ``(K,)``.
         edge_boundary: the part of ``boundary`` that lies on image edges ``(K, K)`` (pixel pairs
             with an edge pixel at either end), or None without an edge map.
+        moments: per-segment sums of u, v, u², uv, v², u·d, v·d ``(K, 7)`` with u, v the pixel
+            coordinates from the image centre in image widths (the plane fit of ``facing``), or None.
     """
 
     count: torch.Tensor
@@ -60,6 +62,7 @@ class NeuronStats:
     d_range: tuple[float, float]
     d_robust: tuple[float, float]
     edge_boundary: torch.Tensor | None = None
+    moments: torch.Tensor | None = None
 
     @property
     def perimeter(self) -> torch.Tensor:
@@ -89,6 +92,7 @@ class ObjectArea:
     purity: float | None = None  # share of the box's valid pixels that are the area's own
     solidity: float | None = None  # opened share of its pixels relative to the map's
     confidence: float | None = None  # rank score relative to the best candidate's (1 = best)
+    facing: float | None = None  # cos of its disparity plane's tilt from the line of sight
 
     @property
     def ranking(self) -> float:
@@ -128,13 +132,14 @@ def disparity_spread(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[tupl
 
 def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int, *,
                  spread: tuple[tuple[float, float], tuple[float, float]] | None = None,
-                 edges: torch.Tensor | None = None) -> NeuronStats:
+                 edges: torch.Tensor | None = None, moments: bool = False) -> NeuronStats:
     """Statistics of the segments of one label map.
 
     Args:
         spread: :func:`disparity_spread` of ``disparity`` over ``labels >= 0`` if already known
             (computed here otherwise).
         edges: ``(H, W)`` bool, pixels on (or near) an image edge; gives ``edge_boundary``.
+        moments: also compute ``moments`` (the segments' coordinate and disparity moments).
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 invalid), ``disparity`` ``(H, W)``.
@@ -176,8 +181,16 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     if edges is not None:
         on = torch.cat([(edges[:, :-1] | edges[:, 1:]).reshape(-1), (edges[:-1, :] | edges[1:, :]).reshape(-1)])
         edge_boundary = symmetric(torch.bincount(flat, weights=on.double(), minlength=(k + 1) ** 2))
+    mom = None
+    if moments:
+        u = ((torch.arange(w, dtype=torch.float64) - 0.5 * (w - 1)) / w).expand(h, w)
+        v = ((torch.arange(h, dtype=torch.float64)[:, None] - 0.5 * (h - 1)) / w).expand(h, w)
+        d = disparity.double()
+        flat_lab = lab.view(-1)
+        mom = torch.stack([torch.bincount(flat_lab, weights=q.reshape(-1), minlength=k + 1)[:k]
+                           for q in (u, v, u * u, u * v, v * v, u * d, v * d)], 1)
     d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
-    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, edge_boundary)
+    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, edge_boundary, mom)
 
 
 def _components(adj: torch.Tensor) -> list[list[int]]:
@@ -261,6 +274,10 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
         map_share = float(stats.edge_boundary.sum() / stats.boundary.sum().clamp_min(1e-300))
         if map_share > 0:
             salience = salience * (share / map_share).clamp(max=1.0) ** cfg.edge_rank
+    facing = None
+    if stats.moments is not None and cfg.facing_rank > 0:
+        facing = _facing(onehot @ stats.moments, n_px, mean)
+        salience = salience * facing ** cfg.facing_rank
     nonempty = stats.count > 0
     big = torch.iinfo(torch.long).max
     x0 = torch.full((len(comps),), big).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 0], "amin")
@@ -274,8 +291,38 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
         if n == 0:
             continue
         areas.append(ObjectArea(comp, int(n), (int(x0[i]), int(y0[i]), int(x1[i]), int(y1[i])), float(mean[i]),
-                                float(contrast[i]), n / total, salience=float(salience[i])))
+                                float(contrast[i]), n / total, salience=float(salience[i]),
+                                facing=None if facing is None else float(facing[i])))
     return areas
+
+
+def _facing(mom: torch.Tensor, n: torch.Tensor, mean_d: torch.Tensor) -> torch.Tensor:
+    """How squarely each area faces the camera: cos of the angle between the normal of its
+    least-squares disparity plane and the line of sight, in [0, 1].
+
+    A 3-D plane is affine in disparity, d = a·u + b·v + c (u, v from the principal point — taken as
+    the image centre — in units of the focal length, taken as the image width); its normal makes
+    an angle θ with the optical axis with tan θ = |(a, b)| / c, c the plane's disparity at the
+    principal point. A fronto-parallel object has cos θ = 1; a side wall or a floor, receding to
+    its vanishing line through the principal point (c ≈ 0), cos θ ≈ 0; c ≤ 0 (a surface seen
+    nearly edge-on) gives 0.
+
+    Shape:
+        ``mom`` ``(C, 7)`` summed :attr:`NeuronStats.moments`; ``n``, ``mean_d`` ``(C,)``.
+    """
+    nn = n.clamp_min(1.0)
+    su, sv, suu, suv, svv, sud, svd = mom.unbind(1)
+    mu, mv = su / nn, sv / nn
+    cuu, cuv, cvv = suu / nn - mu * mu, suv / nn - mu * mv, svv / nn - mv * mv
+    cud, cvd = sud / nn - mu * mean_d, svd / nn - mv * mean_d
+    ridge = 1e-6  # (a thousandth of the image width)²: a 1-px-thin area has no gradient across
+    cuu, cvv = cuu + ridge, cvv + ridge
+    det = cuu * cvv - cuv * cuv
+    a = (cud * cvv - cvd * cuv) / det
+    b = (cvd * cuu - cud * cuv) / det
+    c = mean_d - a * mu - b * mv
+    cos = c / (a * a + b * b + c * c).sqrt().clamp_min(1e-12)
+    return cos.clamp(0.0, 1.0)
 
 
 def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | None = None) -> list[ObjectArea]:

@@ -77,3 +77,47 @@ def test_validate_command_writes_the_left_out_table(shared_data, tmp_path):
             assert sum(rep["candidates"][o["scene"]][k]["useful_hits"] for o in others) >= \
                 sum(rep["candidates"][o["scene"]]["default"]["useful_hits"] for o in others)
     assert "**total**" in (tmp_path / "validate.md").read_text()
+
+
+def _toy_scene():
+    import torch
+
+    from somtorch.disparity.scene import scene_from_arrays
+
+    h, w = 60, 100
+    disp = torch.full((h, w), 10.0)
+    disp[20:50, 30:70] = 20.0 + torch.arange(40, dtype=torch.float32)[None, :] / 10  # 20 ... 23.9
+    objects = torch.zeros(h, w, dtype=torch.long)
+    objects[20:50, 30:70] = 1
+    image = torch.arange(3 * h * w, dtype=torch.int64).remainder(251).to(torch.uint8).view(3, h, w)
+    return scene_from_arrays(disp, image=image, objects=objects, name="toy")
+
+
+def test_pole_junk_stands_in_front_of_the_object_and_occludes_it():
+    import torch
+
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()
+    out = add_junk(scene, "pole")
+    pole = out.disparity != scene.disparity
+    cols = pole.any(0).nonzero().flatten()
+    assert 2 <= cols.numel() <= 3 and 30 < int(cols.min()) < 70  # 1.5 % of the width, across the object
+    rows = pole.any(1).nonzero().flatten()
+    assert int(rows.min()) == 10 and int(rows.max()) == 59  # half-way above the object to the bottom row
+    d95 = float(torch.quantile(scene.disparity[scene.objects == 1], 0.95))
+    assert torch.allclose(out.disparity[pole], torch.tensor(1.25 * d95), atol=0.05)  # nearer than the object
+    assert not bool((out.objects[pole] > 0).any())  # what the pole hides is not scored as the object
+    assert int((out.objects > 0).sum()) == int((scene.objects > 0).sum()) - int((pole & (scene.objects > 0)).sum())
+
+
+def test_flip_junk_mirrors_every_layer():
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()
+    out = add_junk(scene, "flip")
+    assert out.disparity[25, 99 - 35] == scene.disparity[25, 35]
+    assert bool((out.objects.flip(-1) == scene.objects).all()) and bool((out.image.flip(-1) == scene.image).all())
+    assert out.camera is None and out.name == "toy+flip"
+    with pytest.raises(ValueError, match="unknown junk kind"):
+        add_junk(scene, "rotate")
