@@ -57,6 +57,9 @@ class ValidateConfig(RunConfig):
     grid: dict[str, list[Any]] = field(default_factory=dict)
     gallery: Optional[str] = None  # a folder: one picture of member 0 per scene (defaults)
     min_gain: float = 0.02  # a value replaces the default only if it gains > min_gain x the runs
+    # robustness: every scene transformed (experiments.scenes.add_junk: "flip", "resample:F",
+    # "pole", "border", "specks") and scored with the defaults, beside the scenes as they are
+    transforms: list[str] = field(default_factory=list)
 
 
 def _key(overrides: dict[str, Any]) -> str:
@@ -237,8 +240,29 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     if cfg.gallery is not None:
         for c in caches:
             c.gallery(Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
+    robustness = {t: transformed(caches, t) for t in cfg.transforms}
     return {"grid": grid, "defaults": defaults, "in_sample_choice": in_sample, "rows": rows, "totals": totals,
-            "candidates": {c.spec.name: c.scores for c in caches}, "wall_s": time.perf_counter() - t0}
+            "candidates": {c.spec.name: c.scores for c in caches}, "robustness": robustness,
+            "wall_s": time.perf_counter() - t0}
+
+
+def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]]:
+    """The default scores of every scene of ``caches`` transformed by ``add_junk(scene, kind)``,
+    by scene name. A transform is a check of the rule (a mirrored or resampled scene is as easy
+    as the original; a pole in front of the object is a failure class), not a tuning scene: the
+    folds never see it. Scenes already resampled are skipped by a resampling transform."""
+    from experiments.scenes import add_junk
+
+    out = {}
+    for c in caches:
+        if kind.startswith("resample:") and (c.spec.junk or "").startswith("resample:"):
+            continue
+        t0 = time.perf_counter()
+        tc = SceneCache(c.spec, add_junk(c.scene, kind, seed=sum(map(ord, c.spec.name))), c.base)
+        out[c.spec.name] = tc.score({})
+        log.info("%s (%s): default %d useful of %d (%.1f s)", c.spec.name, kind, out[c.spec.name]["useful_hits"],
+                 out[c.spec.name]["runs"], time.perf_counter() - t0)
+    return out
 
 
 def to_markdown(report: dict[str, Any]) -> str:
@@ -260,6 +284,24 @@ def to_markdown(report: dict[str, Any]) -> str:
     out += ["", "Useful hits per candidate (one constant changed):", "",
             "| candidate | " + " | ".join(r["scene"] for r in report["rows"]) + " | total |",
             "|---" * (len(report["rows"]) + 2) + "|"]
+    robust = report.get("robustness") or {}
+    if robust:
+        kinds = list(robust)
+        out += ["", "Robustness (defaults; every scene transformed, useful / all-objects hits):", "",
+                "| scene | as given | " + " | ".join(kinds) + " |", "|---" * (len(kinds) + 2) + "|"]
+        sums = {k: [0, 0] for k in ["as given", *kinds]}
+        for r in report["rows"]:
+            cells = []
+            for k in ["as given", *kinds]:
+                sc = r["default"] if k == "as given" else robust[k].get(r["scene"])
+                if sc is None:
+                    cells.append("–")
+                    continue
+                sums[k][0] += sc["useful_hits"]
+                sums[k][1] += sc["all_objects_hits"]
+                cells.append(f"{sc['useful_hits']} / {sc['all_objects_hits']}")
+            out.append(f"| {r['scene']} | " + " | ".join(cells) + " |")
+        out.append("| **total** | " + " | ".join(f"**{u} / {a}**" for u, a in sums.values()) + " |")
     cands = report["candidates"]
     names = [r["scene"] for r in report["rows"]]
     for key in cands[names[0]]:

@@ -62,7 +62,8 @@ def test_validate_command_writes_the_left_out_table(shared_data, tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "experiments.validate", f"hydra.run.dir={tmp_path}", "ensemble=2",
          "train.epochs=3", "scenes=[kitti,oakd_toy,eth3d_terrace]", f"paths.data_dir={shared_data}",
-         "~grid", "+grid={objects.merge: [0.5], reduction.tolerance_image: [0.03]}"],
+         "~grid", "+grid={objects.merge: [0.5], reduction.tolerance_image: [0.03]}",
+         "transforms=[flip,resample:0.5]"],
         cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     rep = json.loads((tmp_path / "validate.json").read_text())
@@ -76,7 +77,16 @@ def test_validate_command_writes_the_left_out_table(shared_data, tmp_path):
             k = f"{key}={value}"
             assert sum(rep["candidates"][o["scene"]][k]["useful_hits"] for o in others) >= \
                 sum(rep["candidates"][o["scene"]]["default"]["useful_hits"] for o in others)
-    assert "**total**" in (tmp_path / "validate.md").read_text()
+    md = (tmp_path / "validate.md").read_text()
+    assert "**total**" in md
+    # the robustness checks: every scene transformed, scored with the defaults, in the report
+    rob = rep["robustness"]
+    assert list(rob) == ["flip", "resample:0.5"]
+    for kind in rob:
+        assert sorted(rob[kind]) == ["eth3d_terrace", "kitti", "oakd_toy"]
+        assert all(v["runs"] == 2 and 0 <= v["useful_hits"] <= 2 for v in rob[kind].values())
+    assert rob["resample:0.5"]["kitti"]["x_opt"] != rep["rows"][0]["default"]["x_opt"]  # another map
+    assert "| scene | as given | flip | resample:0.5 |" in md
 
 
 def _toy_scene():
