@@ -114,6 +114,11 @@ class SceneCache:
             "identified_95": sum(x.identified_95 for x in s),
             "all_objects_hits": sum(target.hit(m.reduction) for m in members),
             "no_object": sum(m.no_object for m in members),
+            # how the other runs missed: the wrong object (< 50 % of the main object kept), partial
+            # (50-95 %), too much kept (>= 95 % but a reduction under 0.75 x x_opt)
+            "misses": {"wrong": sum(x.identified_fraction < 0.5 for x in s),
+                       "partial": sum(0.5 <= x.identified_fraction < 0.95 for x in s),
+                       "too_much": sum(x.identified_95 and not x.useful_hit for x in s)},
             "mean_reduction": sum(x.reduction_union for x in s) / len(s), "x_opt": s[0].x_opt,
             "ground_object_frac": ground_object_share(ground, self.scene),
         }
@@ -268,18 +273,24 @@ def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]
 def to_markdown(report: dict[str, Any]) -> str:
     """The left-out table: per scene default / in-sample / left-out useful and all-objects hits."""
     out = ["| scene | runs | default useful | in-sample useful | **left-out useful** | left-out, any gain | "
-           "default all-obj | left-out all-obj | no object | ground ∩ objects | left-out choice |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]
+           "default all-obj | left-out all-obj | no object | default misses: wrong / partial / too much | "
+           "ground ∩ objects | left-out choice |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    miss = {"wrong": 0, "partial": 0, "too_much": 0}
     for r in report["rows"]:
         d, i, lo, st = r["default"], r["in_sample"], r["left_out"], r["left_out_strict"]
         choice = ", ".join(f"{k}={v}" for k, v in r["fold_choice"].items()) or "defaults"
+        m = d["misses"]
+        for k in miss:
+            miss[k] += m[k]
         out.append(f"| {r['scene']} | {d['runs']} | {d['useful_hits']} | {i['useful_hits']} | **{lo['useful_hits']}** | "
                    f"{st['useful_hits']} | {d['all_objects_hits']} | {lo['all_objects_hits']} | {d['no_object']} | "
-                   f"{d['ground_object_frac']:.1%} | {choice} |")
+                   f"{m['wrong']} / {m['partial']} / {m['too_much']} | {d['ground_object_frac']:.1%} | {choice} |")
     t = report["totals"]
     out.append(f"| **total** | {t['default']['runs']} | {t['default']['useful_hits']} | {t['in_sample']['useful_hits']} | "
                f"**{t['left_out']['useful_hits']}** | {t['left_out_strict']['useful_hits']} | "
-               f"{t['default']['all_objects_hits']} | {t['left_out']['all_objects_hits']} | {t['default']['no_object']} | | "
+               f"{t['default']['all_objects_hits']} | {t['left_out']['all_objects_hits']} | {t['default']['no_object']} | "
+               f"{miss['wrong']} / {miss['partial']} / {miss['too_much']} | | "
                f"in-sample choice: {', '.join(f'{k}={v}' for k, v in report['in_sample_choice'].items()) or 'defaults'} |")
     out += ["", "Useful hits per candidate (one constant changed):", "",
             "| candidate | " + " | ".join(r["scene"] for r in report["rows"]) + " | total |",

@@ -79,6 +79,9 @@ def test_validate_command_writes_the_left_out_table(shared_data, tmp_path):
                 sum(rep["candidates"][o["scene"]]["default"]["useful_hits"] for o in others)
     md = (tmp_path / "validate.md").read_text()
     assert "**total**" in md
+    for r in rep["rows"]:  # every run is a useful hit or one kind of miss
+        d = r["default"]
+        assert d["useful_hits"] + sum(d["misses"].values()) == d["runs"], d
     # the robustness checks: every scene transformed, scored with the defaults, in the report
     rob = rep["robustness"]
     assert list(rob) == ["flip", "resample:0.5"]
