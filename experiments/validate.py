@@ -295,12 +295,19 @@ def to_markdown(report: dict[str, Any]) -> str:
     out += ["", "Useful hits per candidate (one constant changed):", "",
             "| candidate | " + " | ".join(r["scene"] for r in report["rows"]) + " | total |",
             "|---" * (len(report["rows"]) + 2) + "|"]
+    cands = report["candidates"]
+    names = [r["scene"] for r in report["rows"]]
+    for key in cands[names[0]]:
+        vals = [cands[n][key]["useful_hits"] if key in cands[n] else None for n in names]
+        if None in vals:
+            continue
+        out.append(f"| {key} | " + " | ".join(map(str, vals)) + f" | {sum(vals)} |")
     robust = report.get("robustness") or {}
     if robust:
         kinds = list(robust)
         out += ["", "Robustness (defaults; every scene transformed, useful / all-objects hits):", "",
                 "| scene | as given | " + " | ".join(kinds) + " |", "|---" * (len(kinds) + 2) + "|"]
-        sums = {k: [0, 0] for k in ["as given", *kinds]}
+        sums = {k: [0, 0, 0] for k in ["as given", *kinds]}
         for r in report["rows"]:
             cells = []
             for k in ["as given", *kinds]:
@@ -310,16 +317,10 @@ def to_markdown(report: dict[str, Any]) -> str:
                     continue
                 sums[k][0] += sc["useful_hits"]
                 sums[k][1] += sc["all_objects_hits"]
+                sums[k][2] += sc["runs"]
                 cells.append(f"{sc['useful_hits']} / {sc['all_objects_hits']}")
             out.append(f"| {r['scene']} | " + " | ".join(cells) + " |")
-        out.append("| **total** | " + " | ".join(f"**{u} / {a}**" for u, a in sums.values()) + " |")
-    cands = report["candidates"]
-    names = [r["scene"] for r in report["rows"]]
-    for key in cands[names[0]]:
-        vals = [cands[n][key]["useful_hits"] if key in cands[n] else None for n in names]
-        if None in vals:
-            continue
-        out.append(f"| {key} | " + " | ".join(map(str, vals)) + f" | {sum(vals)} |")
+        out.append("| **total** | " + " | ".join(f"**{u} / {a}** of {n}" for u, a, n in sums.values()) + " |")
     return "\n".join(out) + "\n"
 
 

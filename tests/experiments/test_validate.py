@@ -90,6 +90,11 @@ def test_validate_command_writes_the_left_out_table(shared_data, tmp_path):
         assert all(v["runs"] == 2 and 0 <= v["useful_hits"] <= 2 for v in rob[kind].values())
     assert rob["resample:0.5"]["kitti"]["x_opt"] != rep["rows"][0]["default"]["x_opt"]  # another map
     assert "| scene | as given | flip | resample:0.5 |" in md
+    lines = md.splitlines()
+    head = next(i for i, line in enumerate(lines) if line.startswith("| candidate |"))
+    assert lines[head + 2].startswith("| default |")  # the candidate table is in one piece
+    assert md.index("| scene | as given |") > head
+    assert "of 6 |" in lines[-1]  # each column's total says over how many runs
 
 
 def _toy_scene():
