@@ -31,9 +31,9 @@ class SceneSpec:
     where the other view has no match), ``"specks"`` (isolated 2×2 specks near the object, also at
     its disparity), ``"pole"`` (a thin pole in front of the object, occluding it: the issue's
     traffic-light pole; 1.5 % of the width, 1.25 × the object's 95th-percentile disparity, from
-    half-way above the object to the bottom row, a third of the way across it), ``"flip"`` (the
-    mirrored scene: a check that the rule has no left/right bias) or ``"resample:F"`` (the map
-    resampled by the factor F).
+    half-way between the image top and the object's top down to the bottom row, a third of the
+    way across the object), ``"flip"`` (the mirrored scene: a check that the rule has no
+    left/right bias) or ``"resample:F"`` (the map resampled by the factor F).
     """
 
     name: str

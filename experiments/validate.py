@@ -265,8 +265,9 @@ def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]
         t0 = time.perf_counter()
         tc = SceneCache(c.spec, add_junk(c.scene, kind, seed=sum(map(ord, c.spec.name))), c.base)
         out[c.spec.name] = tc.score({})
-        log.info("%s (%s): default %d useful of %d (%.1f s)", c.spec.name, kind, out[c.spec.name]["useful_hits"],
-                 out[c.spec.name]["runs"], time.perf_counter() - t0)
+        sc = out[c.spec.name]
+        log.info("%s (%s): default %d useful of %d (%.1f s)", c.spec.name, kind, sc["useful_hits"],
+                 sc["runs"], time.perf_counter() - t0)
     return out
 
 
@@ -285,12 +286,13 @@ def to_markdown(report: dict[str, Any]) -> str:
             miss[k] += m[k]
         out.append(f"| {r['scene']} | {d['runs']} | {d['useful_hits']} | {i['useful_hits']} | **{lo['useful_hits']}** | "
                    f"{st['useful_hits']} | {d['all_objects_hits']} | {lo['all_objects_hits']} | {d['no_object']} | "
-                   f"{m['wrong']} / {m['partial']} / {m['too_much']} | {d['ground_object_frac']:.1%} | {choice} |")
+                   f"{m['wrong']} / {m['partial']} / {m['too_much']} | "
+                   f"{d['ground_object_frac']:.1%} | {choice} |")
     t = report["totals"]
     out.append(f"| **total** | {t['default']['runs']} | {t['default']['useful_hits']} | {t['in_sample']['useful_hits']} | "
                f"**{t['left_out']['useful_hits']}** | {t['left_out_strict']['useful_hits']} | "
-               f"{t['default']['all_objects_hits']} | {t['left_out']['all_objects_hits']} | {t['default']['no_object']} | "
-               f"{miss['wrong']} / {miss['partial']} / {miss['too_much']} | | "
+               f"{t['default']['all_objects_hits']} | {t['left_out']['all_objects_hits']} | "
+               f"{t['default']['no_object']} | {miss['wrong']} / {miss['partial']} / {miss['too_much']} | | "
                f"in-sample choice: {', '.join(f'{k}={v}' for k, v in report['in_sample_choice'].items()) or 'defaults'} |")
     out += ["", "Useful hits per candidate (one constant changed):", "",
             "| candidate | " + " | ".join(r["scene"] for r in report["rows"]) + " | total |",

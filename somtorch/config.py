@@ -299,7 +299,8 @@ class AreaConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice("somtorch.tasks.objects:LINKS"),
         "spread": Choice("somtorch.tasks.objects:SPREADS"), "min_boundary": NON_NEGATIVE,
-        "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "edge_rank": NON_NEGATIVE, "facing_rank": NON_NEGATIVE, "grow": BOOL, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
+        "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "edge_rank": NON_NEGATIVE,
+        "facing_rank": NON_NEGATIVE, "grow": BOOL, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,

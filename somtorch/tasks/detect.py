@@ -122,8 +122,8 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
         ``grid_d2`` ``(K, K)`` or None; ``ref_color`` ``(K, 3)`` Y, Cb, Cr or None.
     """
     cfg = cfg or AreaConfig()
-    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread, edges=ctx.edges,
-                         moments=cfg.facing_rank > 0)
+    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread,
+                         edges=ctx.edges, moments=cfg.facing_rank > 0)
     areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, ref_color)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:

@@ -122,11 +122,12 @@ def test_pole_junk_stands_in_front_of_the_object_and_occludes_it():
     cols = pole.any(0).nonzero().flatten()
     assert 2 <= cols.numel() <= 3 and 30 < int(cols.min()) < 70  # 1.5 % of the width, across the object
     rows = pole.any(1).nonzero().flatten()
-    assert int(rows.min()) == 10 and int(rows.max()) == 59  # half-way above the object to the bottom row
+    assert int(rows.min()) == 10 and int(rows.max()) == 59  # from half-way to the object's top, to the bottom
     d95 = float(torch.quantile(scene.disparity[scene.objects == 1], 0.95))
     assert torch.allclose(out.disparity[pole], torch.tensor(1.25 * d95), atol=0.05)  # nearer than the object
     assert not bool((out.objects[pole] > 0).any())  # what the pole hides is not scored as the object
-    assert int((out.objects > 0).sum()) == int((scene.objects > 0).sum()) - int((pole & (scene.objects > 0)).sum())
+    hidden = int((pole & (scene.objects > 0)).sum())
+    assert hidden > 0 and int((out.objects > 0).sum()) == int((scene.objects > 0).sum()) - hidden
 
 
 def test_flip_junk_mirrors_every_layer():
@@ -135,7 +136,8 @@ def test_flip_junk_mirrors_every_layer():
     scene = _toy_scene()
     out = add_junk(scene, "flip")
     assert out.disparity[25, 99 - 35] == scene.disparity[25, 35]
-    assert bool((out.objects.flip(-1) == scene.objects).all()) and bool((out.image.flip(-1) == scene.image).all())
+    assert bool((out.objects.flip(-1) == scene.objects).all())
+    assert bool((out.image.flip(-1) == scene.image).all())
     assert out.camera is None and out.name == "toy+flip"
     with pytest.raises(ValueError, match="unknown junk kind"):
         add_junk(scene, "rotate")
