@@ -60,6 +60,12 @@ def dev_scenes(names: list[str] | None = None, scene_list: str = "dev") -> list[
         known = sorted(p.stem for p in SCENE_LISTS.glob("*.yaml"))
         raise ValueError(f"scene_list={scene_list!r}: no {path}; known lists: {known}")
     specs = [SceneSpec(**d) for d in yaml.safe_load(path.read_text())]
+    for s in specs:
+        if s.junk is not None:
+            try:
+                check_junk_kind(s.junk)
+            except ValueError as e:
+                raise ValueError(f"{path}: scene {s.name!r}: {e}") from None
     if names is None:
         return specs
     known = {s.name for s in specs}
@@ -112,6 +118,24 @@ def _load(spec: SceneSpec, data_dir: Path) -> Any:
                              camera=gt.camera, name=spec.name)
 
 
+JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F")
+
+
+def check_junk_kind(kind: str) -> None:
+    """Raise ``ValueError`` naming the known kinds unless ``kind`` is one of :data:`JUNK_KINDS`
+    (``resample:F`` with F a positive number)."""
+    if kind.startswith("resample:"):
+        try:
+            ok = float(kind.split(":", 1)[1]) > 0
+        except ValueError:
+            ok = False
+        if ok:
+            return
+        raise ValueError(f"junk kind {kind!r}: resample needs a positive factor, e.g. resample:0.5")
+    if kind not in JUNK_KINDS:
+        raise ValueError(f"unknown junk kind {kind!r}: {', '.join(JUNK_KINDS)}")
+
+
 def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
     """A copy of ``scene`` with a synthetic failure class added (see :class:`SceneSpec` ``junk``).
 
@@ -124,6 +148,7 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
 
     from somtorch.disparity.resize import resize_scene
 
+    check_junk_kind(kind)
     if kind.startswith("resample:"):
         f = float(kind.split(":", 1)[1])
         out = resize_scene(scene, max(8, round(scene.width * f)), max(8, round(scene.height * f)))
@@ -161,8 +186,6 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
         objects = torch.where(junk, 0, scene.objects)
         return dataclasses.replace(scene, disparity=disparity, valid=scene.valid | junk, objects=objects,
                                    name=f"{scene.name}+{kind}")
-    else:
-        raise ValueError(f"unknown junk kind {kind!r}: border, specks, pole, flip or resample:F")
     junk &= ~obj
     disparity = torch.where(junk, d_obj, scene.disparity)
     return dataclasses.replace(scene, disparity=disparity, valid=scene.valid | junk,

@@ -211,8 +211,10 @@ def _default_of(cfg: Any, key: str) -> Any:
 
 def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     """Run the protocol of the module docstring; returns the JSON-ready report."""
-    from experiments.scenes import dev_scenes, load_dev_scene
+    from experiments.scenes import check_junk_kind, dev_scenes, load_dev_scene
 
+    for kind in cfg.transforms:  # before any work: a typo must not cost the whole protocol
+        check_junk_kind(kind)
     specs = dev_scenes(cfg.scenes)
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
     grid = {k: list(v) for k, v in cfg.grid.items()}

@@ -141,3 +141,20 @@ def test_flip_junk_mirrors_every_layer():
     assert out.camera is None and out.name == "toy+flip"
     with pytest.raises(ValueError, match="unknown junk kind"):
         add_junk(scene, "rotate")
+
+
+def test_an_unknown_transform_fails_before_any_work(tmp_path):
+    from experiments.scenes import check_junk_kind
+
+    for ok in ("flip", "pole", "resample:0.5"):
+        check_junk_kind(ok)
+    for bad, msg in (("rotate", "unknown junk kind"), ("resample:-2", "positive factor"),
+                     ("resample:x", "positive factor")):
+        with pytest.raises(ValueError, match=msg):
+            check_junk_kind(bad)
+    proc = subprocess.run(
+        [sys.executable, "-m", "experiments.validate", f"hydra.run.dir={tmp_path}", "ensemble=2",
+         "transforms=[flip,rotate]"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0
+    assert "unknown junk kind 'rotate'" in proc.stderr + proc.stdout
+    assert not (tmp_path / "validate.json").exists()
