@@ -68,9 +68,8 @@ class FeatureConfig(Validated):
 
     def stride_at(self, stride: int, height: int, width: int) -> int:
         """``stride`` (counted on ``reference_pixels``) on a ``height × width`` image: times
-        s = √(height · width / reference_pixels) when s > 1, rounded (a smaller image keeps it; a
-        stride of 1, "every pixel", stays 1), so the same scene at a higher resolution trains on
-        as many pixels and its object step reads as many.
+        √(height · width / reference_pixels) when that is > 1, rounded; a smaller image keeps it,
+        a stride of 1 stays 1.
 
         >>> f = FeatureConfig()
         >>> f.stride_at(10, 960, 1280), f.stride_at(2, 240, 320), f.stride_at(1, 960, 1280)
@@ -193,9 +192,8 @@ class GroundConfig(Validated):
         iterations: RANSAC hypotheses.
         sample: pixels drawn for RANSAC (and, with ``constrained``, for the tests).
         seed: RANSAC seed (the result does not depend on the SOM seed).
-        constrained: the inlier, behind and top tests are RANSAC constraints, estimated on a
-            sample for every hypothesis; the best passing one is tested on the full map (off: only
-            the best hypothesis is, so a floor near a threshold depended on the seed).
+        constrained: the inlier, behind and top tests are RANSAC constraints (estimated on a
+            sample for every hypothesis); off: only the best hypothesis is tested.
         tries: passing hypotheses tested on the full map at most, best first.
     """
 
@@ -248,15 +246,12 @@ class AreaConfig(Validated):
         color_rank: with colour features, an area's salience is its contrast plus
             ``color_rank ×`` the disparity spread × its colour distance to its surroundings
             (Y, Cb, Cr in [0, 1]; 0 = disparity contrast only).
-        edge_rank: an area's salience is multiplied by (the share of its border on image edges /
-            the map's share) ** edge_rank, at most 1: a depth boundary no image edge follows is a
-            matching artefact (SGBM streaks on a textureless wall), not an object's outline. Edges:
-            Canny on the left image (thresholds 0.66 / 1.33 × its median), dilated by 0.5 % of the
-            image diagonal. 0 = off; no effect without an image.
-        facing_rank: an area's salience is multiplied by cos θ ** facing_rank, θ the tilt of its
-            least-squares disparity plane from the line of sight (principal point at the image
-            centre, focal length = the image width): a side wall or floor receding to its
-            vanishing point (cos θ ≈ 0) is not an obstacle's face. 0 = off.
+        edge_rank: salience × (share of the area's border on image edges / the map's share) **
+            edge_rank, at most 1: a depth boundary no image edge follows is a matching artefact
+            (:func:`~somtorch.tasks.detect.image_edges`). 0 = off; no effect without an image.
+        facing_rank: salience × cos θ ** facing_rank, θ the tilt of the area's disparity plane
+            from the line of sight: a side wall or floor receding to its vanishing point is not an
+            obstacle's face (:func:`~somtorch.tasks.objects._facing`). 0 = off.
         min_contrast: salient: minimum contrast as a share of the disparity spread.
         max_area_frac, min_area_frac: size limits as shares of the segmented pixels.
         max_areas: how many areas are kept at most.
