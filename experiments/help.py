@@ -24,12 +24,12 @@ USAGE = {
 
 
 def _descriptions(cls: type) -> dict[str, str]:
-    """``{field: first sentence}`` from the ``Attributes:`` section of a class docstring."""
+    """``{field: first sentence}`` from the ``Attributes:`` section of a class docstring, or (a
+    docstring in titled sections, like :class:`~somtorch.config.AreaConfig`'s) from every
+    ``name: text`` entry of it."""
     doc = cls.__doc__ or ""
     out: dict[str, str] = {}
-    if "Attributes:" not in doc:
-        return out
-    body = doc.split("Attributes:", 1)[1]
+    body = doc.split("Attributes:", 1)[1] if "Attributes:" in doc else doc
     current: list[str] = []
     text: list[str] = []
     for line in body.splitlines():

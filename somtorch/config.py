@@ -82,7 +82,14 @@ class FeatureConfig(Validated):
 # ------------------------------------------------------------------------------------ step 1b: SOM
 @dataclass
 class SOMConfig(Validated):
-    """The map: ``rows × cols`` neurons on a rectangular or hexagonal grid; ``init`` of the weights."""
+    """The map: ``rows × cols`` neurons on a rectangular or hexagonal grid.
+
+    Attributes:
+        rows, cols: grid size (one neuron = one segment; ``som=grid4x7`` is the paper's).
+        topology: ``"rectangular"`` or ``"hexagonal"`` neighbours.
+        toroidal: the grid wraps around at its edges.
+        init: initial weights (:data:`somtorch.core.init.INITS`).
+    """
 
     _group: ClassVar[str] = "som"
     _constraints: ClassVar[dict[str, Any]] = {
@@ -238,6 +245,9 @@ class AreaConfig(Validated):
         spread: ``"range"`` (d_max − d_min, the paper's) or ``"robust"`` (5th–95th percentile).
         min_boundary: two segments touch if their common boundary is at least this share of the
             shorter of their two perimeters.
+        hierarchy: the candidates are also the nodes of the areas' merge tree (touching areas
+            joined across the smallest disparity step first,
+            :func:`~somtorch.tasks.objects.merge_tree`), meant with ``merge`` 0.
 
     Selection — which areas are kept:
         select: ``"nearest"`` (largest mean disparity, the paper's), ``"salient"`` (ranked by
@@ -295,7 +305,7 @@ class AreaConfig(Validated):
         "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice("somtorch.tasks.objects:LINKS"),
         "spread": Choice("somtorch.tasks.objects:SPREADS"), "min_boundary": NON_NEGATIVE,
         "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "edge_rank": NON_NEGATIVE,
-        "facing_rank": NON_NEGATIVE, "grow": BOOL, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
+        "facing_rank": NON_NEGATIVE, "hierarchy": BOOL, "grow": BOOL, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
@@ -314,6 +324,7 @@ class AreaConfig(Validated):
     link: str = "image"
     spread: str = "robust"
     min_boundary: float = 0.1
+    hierarchy: bool = False
     size_power: float = 0.25
     color_rank: float = 0.0
     edge_rank: float = 0.0
@@ -343,9 +354,13 @@ class AreaConfig(Validated):
 # ---------------------------------------------------------------------------- step 1d: reduction
 @dataclass
 class ReductionConfig(Validated):
-    """Tolerance margin around each kept box (paper Fig. 16), summed over the three terms:
-    ``tolerance_px`` px, ``tolerance_frac ×`` the box side (the paper's 5 %) and
-    ``tolerance_image ×`` the image diagonal (the default, 2 %)."""
+    """Tolerance margin around each kept box (paper Fig. 16): the sum of the three terms.
+
+    Attributes:
+        tolerance_px: a margin in px.
+        tolerance_frac: a margin of this share of the box side (the paper's 5 %).
+        tolerance_image: a margin of this share of the image diagonal (the default, 1.5 %).
+    """
 
     _group: ClassVar[str] = "reduction"
     _constraints: ClassVar[dict[str, Any]] = {
@@ -360,8 +375,19 @@ class ReductionConfig(Validated):
 # ------------------------------------------------------------------------------------- outputs
 @dataclass
 class OutputConfig(Validated):
-    """Which artefacts a run writes (``member`` selects the ensemble member drawn in the pictures;
-    ``voxel_size`` in the camera's baseline unit, None = no down-sampling)."""
+    """Which artefacts a run writes.
+
+    Attributes:
+        maps: write the pictures (disparity, segments, kept areas, reduced map, summary; PNG) and
+            the reduced map (``reduced.npz``).
+        pointcloud: write the point clouds of the full and the reduced map (PLY).
+        render: also render the reduced point cloud to PNG.
+        checkpoint: write the SOM's weights (``som.safetensors``).
+        tensorboard: write TensorBoard logs (training curves, maps, hparams) under ``tb/``.
+        voxel_size: voxel down-sampling of the point cloud, in the camera's baseline unit (None = off).
+        render_backend: ``"auto"`` (Open3D if it imports, else matplotlib), ``"open3d"``, ``"matplotlib"``.
+        member: the ensemble member drawn in the pictures.
+    """
 
     _group: ClassVar[str] = "output"
     _constraints: ClassVar[dict[str, Any]] = {
@@ -382,12 +408,17 @@ class OutputConfig(Validated):
 
 @dataclass
 class WarmStartConfig(Validated):
-    """A disparity sequence (:class:`somtorch.video.SequenceRunner`): each frame's SOM starts from
-    the previous frame's weights and trains ``warm_epochs`` batch-map epochs from radius
-    ``warm_sigma``; the ground plane is re-used while its inlier share stays ≥ ``ground_keep`` × its
-    share when fitted, and refitted at least every ``ground_every`` frames. ``warm=False``: every
-    frame cold. ``warm_sigma`` 2 was chosen on a synthetic pan over the Motorcycle
-    (``docs/scaling.md``: 1.0 lost the object in 5 of 40 frames, 2.0 in none)."""
+    """A disparity sequence (:class:`somtorch.video.SequenceRunner`).
+
+    Attributes:
+        warm: each frame's SOM starts from the previous frame's weights (False: every frame cold).
+        warm_epochs: batch-map epochs of a warm frame.
+        warm_sigma: neighbourhood radius a warm frame starts from (chosen on a synthetic pan over
+            the Motorcycle, ``docs/scaling.md``: 1.0 lost the object in 5 of 40 frames, 2.0 in none).
+        ground_keep: the ground plane is re-used while its inlier share stays ≥ this × its share
+            when fitted.
+        ground_every: the ground plane is refitted at least every this many frames.
+    """
 
     _group: ClassVar[str] = "sequence"
     _constraints: ClassVar[dict[str, Any]] = {

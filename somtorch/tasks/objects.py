@@ -18,6 +18,9 @@ Selection of the kept areas:
   ``max_areas``;
 * ``"all"`` — every area passing the size limits.
 
+With ``hierarchy`` the candidates are also the nodes of the areas' merge tree (:func:`merge_tree`):
+an object in parts at somewhat different depths is then one candidate beside its parts.
+
 What happens to the selected areas afterwards (joining adjacent segments, box refinement, growing,
 the purity test) is in :mod:`somtorch.tasks.refine`; :func:`~somtorch.tasks.refine.kept_areas` runs
 selection and those steps in order.
@@ -27,6 +30,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from ..config import AreaConfig
@@ -247,13 +251,14 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
     adj.fill_diagonal_(False)
     comps = _components(adj)
     # per-component sums as (C, K) one-hot products: one pass instead of a loop of small tensor ops
-    owner = torch.empty(len(ref), dtype=torch.long)
-    for i, comp in enumerate(comps):
-        owner[comp] = i
     onehot = torch.zeros(len(comps), len(ref), dtype=torch.float64)
-    onehot[owner, torch.arange(len(ref))] = 1.0
+    for i, comp in enumerate(comps):
+        onehot[i, comp] = 1.0
     cnt = stats.count.double()
     md = torch.nan_to_num(stats.mean_d.double())
+    if cfg.hierarchy and len(comps) > 1:
+        onehot = torch.cat([onehot, merge_tree(onehot, stats, cfg.min_boundary)])
+        comps = comps + [row.nonzero().flatten().tolist() for row in onehot[len(comps):]]
     n_px = onehot @ cnt
     mean = (onehot @ (md * cnt)) / n_px.clamp_min(1.0)
     border = (onehot @ stats.boundary) * (1.0 - onehot)  # (C, K) boundary with the segments outside
@@ -278,12 +283,12 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
     if stats.moments is not None and cfg.facing_rank > 0:
         facing = _facing(onehot @ stats.moments, n_px, mean)
         salience = salience * facing ** cfg.facing_rank
-    nonempty = stats.count > 0
+    member = (onehot > 0) & (stats.count > 0)[None, :]  # (C, K): its non-empty segments
     big = torch.iinfo(torch.long).max
-    x0 = torch.full((len(comps),), big).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 0], "amin")
-    y0 = torch.full((len(comps),), big).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 1], "amin")
-    x1 = torch.full((len(comps),), -1).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 2], "amax")
-    y1 = torch.full((len(comps),), -1).scatter_reduce(0, owner[nonempty], stats.box[nonempty, 3], "amax")
+    x0 = torch.where(member, stats.box[None, :, 0], big).amin(1)
+    y0 = torch.where(member, stats.box[None, :, 1], big).amin(1)
+    x1 = torch.where(member, stats.box[None, :, 2], -1).amax(1)
+    y1 = torch.where(member, stats.box[None, :, 3], -1).amax(1)
     total = float(stats.count.sum())
     areas = []
     for i, comp in enumerate(comps):
@@ -294,6 +299,55 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
                                 float(contrast[i]), n / total, salience=float(salience[i]),
                                 facing=None if facing is None else float(facing[i])))
     return areas
+
+
+def merge_tree(onehot: torch.Tensor, stats: NeuronStats, min_boundary: float) -> torch.Tensor:
+    """The inner nodes of the merge tree of the areas ``onehot`` ``(C, K)`` (``AreaConfig.hierarchy``).
+
+    Starting from the areas, the two that touch in the image (common boundary at least
+    ``min_boundary`` of the shorter of their outer perimeters) with the smallest disparity step
+    across that boundary (boundary-weighted mean of |Δ mean d| over the segment pairs on it) are
+    joined into one node, until no two touch: C − 1 joins at most. An object split into parts at
+    somewhat different depths (a hand and its forearm, a canopy and its trunk)
+    joins across its small inner steps before any part joins the background across the large step
+    of its outline, so the whole object is one node; the ranking chooses between a node and its
+    parts (a kept node's parts and ancestors share its segments and are not kept again).
+
+    Returns:
+        ``(N, K)`` float64 membership rows of the inner nodes, in the order they were joined.
+    """
+    md = torch.nan_to_num(stats.mean_d.double())
+    step = stats.boundary * (md[:, None] - md[None, :]).abs()
+    rows = [r for r in onehot.double()]
+    b = (onehot @ stats.boundary @ onehot.T).numpy().copy()  # common boundary of two nodes
+    s = (onehot @ step @ onehot.T).numpy().copy()  # the same, weighted by the step on it
+    np.fill_diagonal(b, 0.0)
+    np.fill_diagonal(s, 0.0)
+    per = b.sum(1)  # outer perimeter of each node (with other segments)
+    alive = np.ones(len(rows), dtype=bool)
+    joined = []
+    while alive.sum() > 1:
+        live = np.flatnonzero(alive)
+        bb, pp = b[np.ix_(live, live)], per[live]
+        touch = (bb > 0) & (bb >= min_boundary * np.minimum(pp[:, None], pp[None, :]))
+        if not touch.any():
+            break
+        cost = np.where(touch, s[np.ix_(live, live)] / np.where(touch, bb, 1.0), np.inf)
+        flat = int(np.argmin(cost))
+        i, j = int(live[flat // len(live)]), int(live[flat % len(live)])
+        rows.append(rows[i] + rows[j])
+        joined.append(rows[-1])
+        nb, ns = b[i] + b[j], s[i] + s[j]
+        nb[[i, j]] = 0.0
+        ns[[i, j]] = 0.0
+        b = np.pad(b, ((0, 1), (0, 1)))
+        s = np.pad(s, ((0, 1), (0, 1)))
+        b[-1, :-1] = b[:-1, -1] = nb
+        s[-1, :-1] = s[:-1, -1] = ns
+        per = np.append(per, per[i] + per[j] - 2.0 * b[i, j])
+        alive[[i, j]] = False
+        alive = np.append(alive, True)
+    return torch.stack(joined) if joined else onehot.new_zeros(0, onehot.shape[1])
 
 
 def _facing(mom: torch.Tensor, n: torch.Tensor, mean_d: torch.Tensor) -> torch.Tensor:
