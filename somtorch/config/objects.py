@@ -1,0 +1,187 @@
+"""Configuration of the ground plane and of paper step 1c, the object areas (see
+:mod:`somtorch.config`; the tuned constants and how each was chosen: ``docs/tuned_constants.md``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from ..constraints import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
+
+
+# ---------------------------------------------------------------------------------- ground plane
+@dataclass
+class GroundConfig(Validated):
+    """The support surface (floor, road), found by RANSAC in (x, y, d) and verified before removal.
+
+    Attributes:
+        enabled: look for a ground plane at all.
+        tol_frac: inlier band half-width as a fraction of the map's disparity range (1st–99th
+            percentile) …
+        tol_px: … but at least this many px.
+        min_inlier_frac: a plane needs this share of the valid pixels.
+        min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
+            of the disparity range: a floor spans it, from its horizon to the nearest thing in view;
+            a seat, a bed, a table top or a slanted wall spans a part (docs/tuned_constants.md).
+        max_top_frac: a plane covering more than this share of the valid pixels of the top third
+            of the image is not ground (a wall or a slanted object).
+        max_below_frac: a support surface hides what lies beneath it, so at most this share of the
+            valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
+            (disparity below the band); a ramp, a lattice or a plane through the objects fails
+            (1 = no check).
+        slope_rows: a ground pixel must also rise down the image like the plane, measured over
+            ``slope_rows ×`` the image height above and below it, so the vertical surfaces that
+            cross the plane's band (an object's base, legs) stay out of the mask (0 = off).
+        iterations: RANSAC hypotheses.
+        sample: pixels drawn for RANSAC (and, with ``constrained``, for the tests).
+        seed: RANSAC seed (the result does not depend on the SOM seed).
+        constrained: the inlier, behind and top tests are RANSAC constraints (estimated on a
+            sample for every hypothesis); off: only the best hypothesis is tested.
+        tries: passing hypotheses tested on the full map at most, best first.
+    """
+
+    _group: ClassVar[str] = "ground"
+    _constraints: ClassVar[dict[str, Any]] = {
+        "enabled": BOOL, "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
+        "min_slope_frac": NON_NEGATIVE, "max_top_frac": FRACTION, "max_below_frac": FRACTION,
+        "slope_rows": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
+        "constrained": BOOL, "tries": POSITIVE_INT,
+    }
+
+    enabled: bool = True
+    tol_frac: float = 0.02
+    tol_px: float = 0.5
+    min_inlier_frac: float = 0.08
+    min_slope_frac: float = 1.0
+    max_top_frac: float = 0.15
+    max_below_frac: float = 0.1
+    slope_rows: float = 0.0
+    iterations: int = 400
+    sample: int = 5000
+    seed: int = 0
+    constrained: bool = True
+    tries: int = 5
+
+
+# ------------------------------------------------------------------------------ step 1c: objects
+@dataclass
+class AreaConfig(Validated):
+    """Object-area recognition (paper step 1c), see :mod:`somtorch.tasks.objects` and
+    :mod:`somtorch.tasks.refine`.
+
+    The defaults are the ``robust`` rule; ``conf/objects/paper.yaml`` holds the paper's literal rule
+    (``link="grid"``, ``spread="range"``, ``similarity=0.1``, ``select="nearest"``, no refinement).
+
+    Linking — which neurons form one area:
+        similarity: two linked neurons are similar if their reference disparities differ by less
+            than ``similarity ×`` the map's disparity spread.
+        connectivity: 4 (grid rows/columns) or 8 (diagonals too) for ``link="grid"``.
+        link: ``"grid"`` (adjacent on the SOM grid, the paper's rule), ``"image"`` (their segments
+            share a boundary in the image) or ``"both"``.
+        spread: ``"range"`` (d_max − d_min, the paper's) or ``"robust"`` (5th–95th percentile).
+        min_boundary: two segments touch if their common boundary is at least this share of the
+            shorter of their two perimeters.
+        hierarchy: the candidates are also the nodes of the areas' merge tree (touching areas
+            joined across the smallest disparity step first,
+            :func:`~somtorch.tasks.objects.merge_tree`), meant with ``merge`` 0.
+
+    Selection — which areas are kept:
+        select: ``"nearest"`` (largest mean disparity, the paper's), ``"salient"`` (ranked by
+            contrast to the surrounding segments × ``area_frac ** size_power``) or ``"all"``.
+        size_power: weight of the area's size in the salient ranking (0 = contrast alone).
+        color_rank: with colour features, an area's salience is its contrast plus
+            ``color_rank ×`` the disparity spread × its colour distance to its surroundings
+            (Y, Cb, Cr in [0, 1]; 0 = disparity contrast only).
+        edge_rank: salience × (share of the area's border on image edges / the map's share) **
+            edge_rank, at most 1: a depth boundary no image edge follows is a matching artefact
+            (:func:`~somtorch.tasks.detect.image_edges`). 0 = off; no effect without an image.
+        facing_rank: salience × cos θ ** facing_rank, θ the tilt of the area's disparity plane
+            from the line of sight: a side wall or floor receding to its vanishing point is not an
+            obstacle's face (:func:`~somtorch.tasks.objects._facing`). 0 = off.
+        min_contrast: salient: minimum contrast as a share of the disparity spread.
+        max_area_frac, min_area_frac: size limits as shares of the segmented pixels.
+        max_areas: how many areas are kept at most.
+        keep_ratio: with ``max_areas > 1``, a further area is kept only if its rank score is at
+            least this share of the best one's (1 = only ties; 0 = up to ``max_areas``).
+        keep_budget: a further area is kept only if the union of the kept boxes then holds at most
+            this share of the valid pixels (the data-reduction budget: every salient area that
+            fits is kept, one that would make the reduction too small is skipped; the first area
+            is always kept). 1 = no budget.
+        fail_safe: when no candidate passes the checks, keep the whole map (and flag
+            ``no_object``) instead of the best-ranked candidate.
+
+    Refinement — from a selected area to its kept box:
+        merge: join the image-adjacent segments whose mean disparity is within ``merge ×`` the
+            area's contrast of its own (0 = off).
+        min_purity: the kept box must hold at least this share of its own pixels, of the valid
+            pixels inside it, else the next candidate is tried (0 = off).
+        min_solidity: the area's segments must keep at least ``min_solidity ×`` the map's own
+            share of pixels through an opening with a square of ``solidity_size ×`` the shorter
+            image side, else the next candidate is tried (0 = off).
+        solidity_size: side of that square as a share of the shorter image side.
+        purity_candidates: how many ranked candidates the purity and solidity tests may try.
+        grow: replace each kept area by the image-connected region nearer than half-way between
+            it and its surroundings.
+        grow_stride: the growing, the box refinement and the solidity work on every n-th pixel.
+        map_stride: the whole object step reads every n-th pixel of the label map in y and x
+            (1 = all; 2 = a quarter of them, about 3× faster): boxes are mapped back to full size
+            and the reduction is computed on the full map.
+        box_coverage: the box covers the area's largest image-connected pieces up to this share of
+            its pixels (1 = all).
+        box_quantile: the box spans the ``q … 1 − q`` quantiles of the kept pixels' coordinates.
+        ground_clutter: pieces lying within ``ground_clutter ×`` the ground plane's inlier band
+            are left out of the box (0 = off).
+        drop_specks: image-connected pieces of the area without a solid 3 × 3 block (on the
+            refinement grid) are left out of its box: specks and sparse speckle bands at the
+            object's disparity stop stretching it.
+    """
+
+    _group: ClassVar[str] = "objects"
+    _constraints: ClassVar[dict[str, Any]] = {
+        "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice("somtorch.tasks.objects:LINKS"),
+        "spread": Choice("somtorch.tasks.objects:SPREADS"), "min_boundary": NON_NEGATIVE,
+        "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "edge_rank": NON_NEGATIVE,
+        "facing_rank": NON_NEGATIVE, "hierarchy": BOOL, "grow": BOOL, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
+        "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
+        "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
+        "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
+        "select": Choice("somtorch.tasks.objects:SELECTIONS"), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
+        "keep_budget": Interval(0, 1, open_lo=True),
+        "fail_safe": BOOL, "min_contrast": NON_NEGATIVE, "max_area_frac": Interval(0, 1, open_lo=True),
+        "min_area_frac": FRACTION,
+    }
+    _relations: ClassVar[list[tuple[Any, str]]] = [
+        (lambda c: c.min_area_frac < c.max_area_frac,
+         "need min_area_frac < max_area_frac; got {c.min_area_frac} and {c.max_area_frac}"),
+    ]
+
+    similarity: float = 0.05
+    connectivity: int = 4
+    link: str = "image"
+    spread: str = "robust"
+    min_boundary: float = 0.1
+    hierarchy: bool = False
+    size_power: float = 0.25
+    color_rank: float = 0.0
+    edge_rank: float = 0.0
+    facing_rank: float = 0.0
+    grow: bool = False
+    grow_stride: int = 2
+    map_stride: int = 2
+    box_coverage: float = 0.99
+    box_quantile: float = 0.001
+    ground_clutter: float = 3.0
+    drop_specks: bool = True
+    merge: float = 0.75
+    min_purity: float = 0.25
+    min_solidity: float = 0.25
+    solidity_size: float = 0.02
+    purity_candidates: int = 5
+    select: str = "salient"
+    max_areas: int = 4
+    keep_ratio: float = 0.2
+    keep_budget: float = 0.3
+    fail_safe: bool = True
+    min_contrast: float = 0.0
+    max_area_frac: float = 0.7
+    min_area_frac: float = 0.01

@@ -1,0 +1,152 @@
+"""Configuration of paper steps 1a–1b: the input features, the SOM, its training, the baseline
+segmenters (see :mod:`somtorch.config`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from ..constraints import BOOL, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
+
+_SOM = "somtorch.core.som"
+
+
+# ----------------------------------------------------------------------------------- step 1a: input
+@dataclass
+class FeatureConfig(Validated):
+    """Input data set (paper step 1a): each valid pixel → (y, x, d), see :mod:`somtorch.disparity.features`.
+
+    Attributes:
+        normalize: ``"image"`` (y, x scaled by the longer image side, d by the same factor after
+            ``d_weight``), ``"minmax"`` (each feature to [0, 1], the paper's reading) or ``"none"``.
+        d_weight: weight of the disparity feature (2 = disparity counts twice as much as position).
+        train_stride: 1 = NOR (train on every valid pixel), 10 = OR (every 10th pixel in y and x,
+            the paper's runtime-optimised mode); the whole map is always segmented.
+        color_weight: append the left image's Y, Cb, Cr (each in [0, 1]) times this weight to
+            every pixel vector (0 = off; needs the scene's image).
+        speckle_frac: remove image-connected speckles of similar disparity smaller than this share
+            of the pixels before anything else (OpenCV ``filterSpeckles``; 0 = off).
+        reference_pixels: the pipeline's strides (``train_stride``, ``objects.map_stride``,
+            ``objects.grow_stride``) are counted on an image of this many pixels (640 × 480), see
+            :meth:`stride_at`; 0 = strides in pixels as given (the paper's reading).
+    """
+
+    _group: ClassVar[str] = "features"
+    _constraints: ClassVar[dict[str, Any]] = {
+        "normalize": Choice("somtorch.disparity.features:NORMALIZATIONS"),
+        "d_weight": POSITIVE, "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
+        "speckle_frac": Interval(0, 1), "reference_pixels": Interval(0, None, integer=True),
+    }
+
+    normalize: str = "image"
+    d_weight: float = 2.0
+    color_weight: float = 0.0
+    train_stride: int = 10
+    speckle_frac: float = 0.0
+    reference_pixels: int = 307_200
+
+    def stride_at(self, stride: int, height: int, width: int) -> int:
+        """``stride`` (counted on ``reference_pixels``) on a ``height × width`` image: times
+        √(height · width / reference_pixels) when that is > 1, rounded; a smaller image keeps it,
+        a stride of 1 stays 1.
+
+        >>> f = FeatureConfig()
+        >>> f.stride_at(10, 960, 1280), f.stride_at(2, 240, 320), f.stride_at(1, 960, 1280)
+        (20, 2, 1)
+        """
+        scale = 1.0 if self.reference_pixels == 0 else (height * width / self.reference_pixels) ** 0.5
+        return 1 if stride == 1 else max(1, int(stride * max(scale, 1.0) + 0.5))
+
+
+# ------------------------------------------------------------------------------------ step 1b: SOM
+@dataclass
+class SOMConfig(Validated):
+    """The map: ``rows × cols`` neurons on a rectangular or hexagonal grid.
+
+    Attributes:
+        rows, cols: grid size (one neuron = one segment; ``som=grid4x7`` is the paper's).
+        topology: ``"rectangular"`` or ``"hexagonal"`` neighbours.
+        toroidal: the grid wraps around at its edges.
+        init: initial weights (:data:`somtorch.core.init.INITS`).
+    """
+
+    _group: ClassVar[str] = "som"
+    _constraints: ClassVar[dict[str, Any]] = {
+        "rows": POSITIVE_INT, "cols": POSITIVE_INT, "topology": Choice("somtorch.core.grid:TOPOLOGIES"),
+        "toroidal": BOOL, "init": Choice("somtorch.core.init:INITS"),
+    }
+
+    rows: int = 8
+    cols: int = 8
+    topology: str = "rectangular"
+    toroidal: bool = False
+    init: str = "random"
+
+
+@dataclass
+class TrainConfig(Validated):
+    """SOM training (paper step 1b); the defaults of :meth:`somtorch.SOM.fit`.
+
+    Attributes:
+        mode: ``"batch"`` (batch map), ``"minibatch"`` or ``"online"`` (Kohonen's rule, the paper's).
+        epochs: passes over the training pixels.
+        lr: initial learning rate α0 (online / minibatch).
+        sigma: initial neighbourhood radius σ0 in grid units; None = ``max(rows, cols) / 2``.
+        lr_decay, sigma_decay: decay schedules (:data:`somtorch.core.decay.DECAYS`).
+        neighborhood: neighbourhood function (:data:`somtorch.core.neighborhood.NEIGHBORHOODS`).
+        order: ``"random"`` or ``"sequential"`` sample order.
+        batch_size: samples per step of the minibatch rule.
+        parallel: ``"none"``; ``"data"`` (data-parallel batch map on ``torch.distributed``: each rank
+            trains on its shard of the pixels, statistics all-reduced per epoch; batch mode only) or
+            ``"members"`` (ensemble members dealt to the ranks and gathered). Needs a process group
+            (``torchrun ... -m experiments.distributed``, ``docs/scaling.md``).
+    """
+
+    _group: ClassVar[str] = "train"
+    _constraints: ClassVar[dict[str, Any]] = {
+        "mode": Choice(f"{_SOM}:MODES"), "epochs": POSITIVE_INT, "lr": POSITIVE,
+        "sigma": Interval(0, None, open_lo=True, optional=True),
+        "lr_decay": Choice("somtorch.core.decay:DECAYS"), "sigma_decay": Choice("somtorch.core.decay:DECAYS"),
+        "neighborhood": Choice("somtorch.core.neighborhood:NEIGHBORHOODS"), "order": Choice(f"{_SOM}:ORDERS"),
+        "batch_size": POSITIVE_INT, "parallel": OneOf(("none", "data", "members")),
+    }
+    _relations: ClassVar[list[tuple[Any, str]]] = [
+        (lambda c: c.parallel != "data" or c.mode == "batch",
+         "parallel='data' trains the batch map; got mode={c.mode!r} (use parallel='members' for it)"),
+    ]
+
+    mode: str = "batch"
+    epochs: int = 10
+    lr: float = 0.5
+    sigma: float | None = None
+    lr_decay: str = "asymptotic"
+    sigma_decay: str = "asymptotic"
+    neighborhood: str = "gaussian"
+    order: str = "random"
+    batch_size: int = 256
+    parallel: str = "none"
+
+
+@dataclass
+class BaselineConfig(Validated):
+    """Parameters of the baseline segmenters (``method`` other than ``"som"``).
+
+    ``n_segments`` (SLIC) None = the SOM's K = rows·cols, so every method splits the map into about
+    as many segments; k-means always uses K centres. ``fz_*``: Felzenszwalb's scale, smoothing and
+    minimum segment size in px; ``slic_compactness`` suits a [0, 1] disparity image.
+    """
+
+    _group: ClassVar[str] = "baseline"
+    _constraints: ClassVar[dict[str, Any]] = {
+        "kmeans_iterations": POSITIVE_INT, "kmeans_init": OneOf(("kmeans++", "sample")),
+        "n_segments": Interval(1, None, integer=True, optional=True), "slic_compactness": POSITIVE,
+        "fz_scale": POSITIVE, "fz_sigma": NON_NEGATIVE, "fz_min_size": POSITIVE_INT,
+    }
+
+    kmeans_iterations: int = 20
+    kmeans_init: str = "kmeans++"
+    n_segments: int | None = None
+    slic_compactness: float = 0.03
+    fz_scale: float = 1000.0
+    fz_sigma: float = 0.5
+    fz_min_size: int = 200
