@@ -241,11 +241,11 @@ def batch_step(weight: torch.Tensor, x: torch.Tensor, lr: torch.Tensor | None, s
 def _blocks(total: int, size: int, every: int | None) -> Iterator[tuple[int, int]]:
     """Consecutive ``(start, stop)`` ranges of at most ``size`` steps that also end at every multiple
     of ``every`` (so that callbacks fire exactly there)."""
-    cuts = set(range(size, total, size)) | {total}
-    if every:
-        cuts |= set(range(every, total, every))
     start = 0
-    for stop in sorted(cuts):
+    while start < total:  # lazily: a schedule of 10^9 steps must not build 10^9 cuts first
+        stop = min(total, (start // size + 1) * size)
+        if every:
+            stop = min(stop, (start // every + 1) * every)
         yield start, stop
         start = stop
 
