@@ -10,7 +10,7 @@ import json
 from typing import Any
 
 SCHEMA = "somtorch.study/1"
-_UNHASHED = ("paths", "output", "skip_complete", "study", "repeats")
+_UNHASHED = ("paths", "output", "skip_complete", "study", "repeats", "resources")
 
 
 def config_hash(config: dict[str, Any]) -> str:

@@ -82,6 +82,18 @@ def load_input(cfg: RunConfig):
     return scene
 
 
+def check_resources(scene, cfg: RunConfig, what: str, times: float = 1) -> None:
+    """Refuse (:class:`somtorch.resources.ResourceError`, one line) a job on ``scene`` that would need
+    more memory or time than ``cfg.resources`` allows; run ``times`` times over. Logs the estimate."""
+    from somtorch.pipeline import resource_estimate
+    from somtorch.resources import check
+
+    est = resource_estimate(scene, cfg).times(times)
+    log.debug("%s: estimated %s", what, est.describe())
+    if cfg.resources.check:
+        check(est, max_memory_frac=cfg.resources.max_memory_frac, max_hours=cfg.resources.max_hours, what=what)
+
+
 def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> dict:
     """Run the pipeline described by ``cfg`` and write every output into ``out_dir``.
 
@@ -101,6 +113,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     scene = load_input(cfg)
     if cfg.object_id is not None and scene.objects is None:
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
+    check_resources(scene, cfg, f"scene {scene.name} ({scene.width}x{scene.height}, ensemble={cfg.runs})")
     out_dir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     writer = None

@@ -18,6 +18,7 @@ from typing import Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
+from somtorch.config import ResourcesConfig
 from somtorch.outputs import OutputConfig
 from somtorch.pipeline import PipelineConfig
 
@@ -84,6 +85,7 @@ class RunConfig(PipelineConfig):
     data: DataConfig = field(default_factory=DataConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
     paths: PathsConfig = field(default_factory=PathsConfig)
+    resources: ResourcesConfig = field(default_factory=ResourcesConfig)  # the check before any work
     label: str = "robust"  # a name for the configuration (set by presets; shown in tables)
 
 
@@ -97,6 +99,15 @@ def register() -> None:
     cs.store(name="run_schema", node=RunConfig)
     # ${stem:${data.source}}: a file input's run folder and scene are named after the file
     OmegaConf.register_new_resolver("stem", lambda p: Path(str(p)).stem or "file", replace=True)
+
+
+def log_to_file(log: logging.Logger, level: int, msg: str, *args: object) -> None:
+    """Log a record into the file handlers only (``run.log``), not onto the console: for a message
+    the console gets once, as one plain line on stderr."""
+    record = log.makeRecord(log.name, level, __file__, 0, msg, args, None)
+    for h in logging.getLogger().handlers + log.handlers:
+        if isinstance(h, logging.FileHandler) and record.levelno >= h.level:
+            h.handle(record)
 
 
 @contextlib.contextmanager
@@ -113,6 +124,6 @@ def one_line_errors(log: logging.Logger) -> Iterator[None]:
         if os.environ.get("HYDRA_FULL_ERROR") == "1":
             raise
         msg = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        log.error("%s: %s", type(err).__name__, msg)  # into run.log
+        log_to_file(log, logging.ERROR, "%s: %s", type(err).__name__, msg)  # into run.log (stderr: below)
         print(f"error: {msg} (the full traceback: HYDRA_FULL_ERROR=1)", file=sys.stderr)
         raise SystemExit(2) from None

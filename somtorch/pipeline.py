@@ -26,6 +26,7 @@ from .core import SOM
 from .disparity.features import Features, make_features
 from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
+from .resources import Estimate, estimate
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
 from .tasks.detect import MapContext, find_objects
 from .tasks.ground import GroundPlane, fit_ground_plane
@@ -253,6 +254,18 @@ def _full_size(area: ObjectArea, s: int, h: int, w: int) -> ObjectArea:
             return b
         return (b[0] * s, b[1] * s, min(w - 1, b[2] * s), min(h - 1, b[3] * s))
     return replace(area, box=box(area.box), segment_box=box(area.segment_box), pixels=area.pixels * s * s)
+
+
+def resource_estimate(scene: Scene, cfg: PipelineConfig) -> Estimate:
+    """Peak memory and time :func:`run_pipeline` will need on ``scene`` (:mod:`somtorch.resources`),
+    from sizes only: the training pixels are counted on the stride grid of the valid mask."""
+    s = train_stride(scene, cfg)
+    h, w = scene.valid.shape
+    return estimate(height=h, width=w, valid=scene.n_valid, train=int(scene.valid[::s, ::s].sum()),
+                    dim=3 + 3 * (cfg.features.color_weight > 0), units=cfg.som.rows * cfg.som.cols,
+                    members=cfg.runs, epochs=cfg.train.epochs, mode=cfg.train.mode,
+                    batch_size=cfg.train.batch_size, method=cfg.method, iterations=cfg.baseline.kmeans_iterations,
+                    map_stride=cfg.features.stride_at(cfg.objects.map_stride, h, w))
 
 
 def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: bool = False,

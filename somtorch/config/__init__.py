@@ -21,11 +21,13 @@ from __future__ import annotations
 
 from ..constraints import Choice, Flag, Interval, OneOf, Validated
 from .objects import AreaConfig, GroundConfig
-from .pipeline import OutputConfig, PipelineConfig, ReductionConfig, WarmStartConfig, with_overrides
+from .pipeline import (OutputConfig, PipelineConfig, ReductionConfig, ResourcesConfig, WarmStartConfig,
+                       with_overrides)
 from .segmentation import BaselineConfig, FeatureConfig, SOMConfig, TrainConfig
 
 __all__ = [
     "AreaConfig", "BaselineConfig", "Choice", "FeatureConfig", "Flag", "GroundConfig", "Interval", "OneOf",
-    "OutputConfig", "PipelineConfig", "ReductionConfig", "SOMConfig", "TrainConfig", "Validated", "WarmStartConfig",
+    "OutputConfig", "PipelineConfig", "ReductionConfig", "ResourcesConfig", "SOMConfig", "TrainConfig", "Validated",
+    "WarmStartConfig",
     "with_overrides",
 ]

@@ -93,6 +93,23 @@ class WarmStartConfig(Validated):
     ground_every: int = 15
 
 
+# ---------------------------------------------------------------------------------- resources
+@dataclass
+class ResourcesConfig(Validated):
+    """The check before any work (:mod:`somtorch.resources`): a job whose estimated peak memory
+    exceeds ``max_memory_frac`` of the memory available, or whose estimated time exceeds
+    ``max_hours``, is refused with one line; ``check=False`` skips the check."""
+
+    _group: ClassVar[str] = "resources"
+    _constraints: ClassVar[dict[str, Any]] = {
+        "check": BOOL, "max_memory_frac": Interval(0, None, open_lo=True), "max_hours": POSITIVE,
+    }
+
+    check: bool = True
+    max_memory_frac: float = 0.8
+    max_hours: float = 24.0
+
+
 # ------------------------------------------------------------------------------------ pipeline
 @dataclass
 class PipelineConfig(Validated):

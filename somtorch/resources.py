@@ -1,0 +1,208 @@
+"""Memory and time a run will need, predicted from sizes alone, checked before any work.
+
+:func:`estimate` is a pure function of the sizes of a job (image, valid and training pixels,
+feature dimension D, neurons K, members E, epochs, training rule, object-step stride). It models the
+big tensors each stage holds at its peak:
+
+* training: the batch map's neighbourhood matrix ``(E, K, K)`` float32 (three of them: the
+  neighbourhood function's temporaries), the weights and their sums
+  ``(E, K, D + 1)`` (a few copies), and for the online / mini-batch rules the per-member sample order
+  ``(E, N_train)`` int64 and one block of samples ``(E, S, D)``;
+* labelling (BMU of every pixel): the label maps ``(E, H, W)`` int64 plus the BMU indices
+  ``(E, N)`` int64 they are scattered from;
+* object step: the label maps (still held) plus their strided copy ``(E, H/s, W/s)`` int64 and the
+  per-map work buffers (``~64 B`` per read pixel).
+
+The peak is the largest stage plus what every stage holds (features, scene, chunk buffers). It
+is the memory *added* to the process that calls it (the imported libraries are already resident),
+so it is compared with the memory still available: ``MemAvailable`` of ``/proc/meminfo``, capped by
+the cgroup limit (v2 ``memory.max − memory.current``, v1 ``memory.limit_in_bytes −
+memory.usage_in_bytes``). Measured on small real runs (``tests/test_resources.py``) the estimate is
+an upper bound of the measured peak RSS increase and at most 2.5× it once the job holds more than
+~200 MB (small jobs are dominated by the fixed allowance for allocator slack).
+
+Times are rough (order of magnitude, per-element costs measured on a 2-core CPU with the native
+kernel): they refuse the absurd (``train.epochs=1000000000``), not the merely long.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from .validation import SomtorchError
+
+__all__ = ["Estimate", "ResourceError", "available_memory", "check", "estimate", "fmt_bytes", "fmt_seconds"]
+
+GIB = 1 << 30
+_FIXED = 96 << 20  # allocator slack, chunk buffers of the BMU search (16 MiB of scores, a few of them)
+_CHUNK = 1 << 22  # somtorch.core.distance.DEFAULT_CHUNK_ELEMENTS
+_BLOCK = 4096  # somtorch.core.training.BLOCK_STEPS
+# seconds per unit of work (2-core CPU, native kernel; deliberately rounded up)
+_T_BATCH = 3e-10  # per member x training pixel x neuron, one epoch of the batch map
+_T_KK = 2e-9  # per member x neuron², one batch-map update (neighbourhood product)
+_T_ONLINE = 1.5e-8  # per member x step x neuron, online rule
+_T_STEP = 2e-6  # per step, Python / kernel launch overhead
+_T_EPOCH = 2.5e-4  # per batch-map epoch: schedule, kernel launches, the update
+_T_LABEL = 8e-10  # per member x pixel x neuron, BMU labelling
+_T_OBJECT = 1e-7  # per member x pixel read by the object step
+_T_MEMBER = 2e-3  # per member: object step bookkeeping, reduction
+_T_MINISOM = 3e-5  # per member x step of the MiniSom (pure NumPy) baseline
+_T_SUPERPIXEL = 2e-6  # per pixel of SLIC / Felzenszwalb
+
+
+class ResourceError(SomtorchError, RuntimeError):
+    """A job would need more memory or time than its budget; raised before any work."""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Predicted extra memory (bytes) per stage and the whole job's peak, and seconds per stage."""
+
+    train_bytes: int
+    label_bytes: int
+    objects_bytes: int
+    peak_bytes: int
+    train_s: float
+    label_s: float
+    objects_s: float
+
+    @property
+    def seconds(self) -> float:
+        return self.train_s + self.label_s + self.objects_s
+
+    def times(self, n: int | float) -> Estimate:
+        """The same job run ``n`` times one after another (same peak, ``n`` × the time)."""
+        return Estimate(self.train_bytes, self.label_bytes, self.objects_bytes, self.peak_bytes,
+                        self.train_s * n, self.label_s * n, self.objects_s * n)
+
+    def describe(self) -> str:
+        return (f"~{fmt_bytes(self.peak_bytes)} peak (training {fmt_bytes(self.train_bytes)}, labelling "
+                f"{fmt_bytes(self.label_bytes)}, objects {fmt_bytes(self.objects_bytes)}), ~{fmt_seconds(self.seconds)}")
+
+
+def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, units: int = 64, members: int = 1,
+             epochs: int = 10, mode: str = "batch", batch_size: int = 256, map_stride: int = 1,
+             method: str = "som", iterations: int = 20) -> Estimate:
+    """Predicted peak memory and time of one pipeline call (see the module docstring).
+
+    Args:
+        height, width: the map, px. valid: pixels segmented (≤ H·W). train: training pixels.
+        dim: features per pixel D. units: neurons K (k-means centres). members: E.
+        epochs, mode, batch_size: the SOM's training (``mode`` online / batch / minibatch).
+        map_stride: the object step reads every ``map_stride``-th pixel in y and x.
+        method: the segmenter (``som``, ``minisom``, ``kmeans``, ``slic``, ``felzenszwalb``).
+        iterations: k-means iterations.
+
+    >>> e = estimate(height=500, width=741, valid=343_274, train=1_979, members=400, map_stride=2)
+    >>> 1.9 < e.peak_bytes / 2**30 < 3.0
+    True
+    """
+    hw, n, nt, e, k, d = height * width, valid, train, members, units, dim
+    feats = n * (d * 4 + 16) + nt * d * 4 + hw * 12  # features, pixel coordinates, the scene's maps
+    if method in ("slic", "felzenszwalb"):
+        train_b, train_s = hw * 32, hw * _T_SUPERPIXEL
+    elif method == "kmeans":
+        train_b = e * nt * 8 + e * k * (d + 1) * 16 + min(e * nt * k, _CHUNK) * 4 * 3
+        train_s = iterations * e * nt * k * _T_BATCH
+    else:
+        weights = e * k * (d + 1) * 4 * 4  # weights, sums, target, the product's input
+        if mode == "batch":
+            train_b = weights + e * k * k * 4 * 3  # the neighbourhood's (E, K, K) and its temporaries
+            train_s = epochs * (e * nt * k * _T_BATCH + e * k * k * _T_KK + _T_EPOCH)
+        elif mode == "minibatch":
+            steps = max(1, epochs * nt // batch_size)
+            train_b = weights + e * k * k * 4 * 3 + e * nt * 8 + e * batch_size * d * 4
+            train_s = epochs * e * nt * k * _T_BATCH + steps * (e * k * k * _T_KK + _T_STEP)
+        else:  # online: one block of S steps' samples and schedule values per member
+            s = min(_BLOCK, epochs * nt)
+            train_b = weights + e * nt * 8 + e * s * (d + 2) * 4 + e * k * d * 4
+            train_s = epochs * nt * (_T_STEP + e * k * _T_ONLINE)
+        if method == "minisom":
+            train_s = e * epochs * nt * _T_MINISOM
+        train_b += min(e * nt * k, _CHUNK) * 4 * 3  # one chunk of distances (and its argmin)
+    label_b = e * (hw + n) * 8 + min(e * n * k, _CHUNK) * 4 * 3
+    label_s = e * n * k * _T_LABEL
+    read = math.ceil(height / map_stride) * math.ceil(width / map_stride)
+    objects_b = e * hw * 8 + (e * read * 8 if map_stride > 1 else 0) + read * 64 + hw * 24
+    objects_s = e * (read * _T_OBJECT + _T_MEMBER)
+    peak = feats + _FIXED + max(train_b, label_b, objects_b)
+    return Estimate(int(train_b), int(label_b), int(objects_b), int(peak), float(train_s), float(label_s),
+                    float(objects_s))
+
+
+def _read_int(path: Path) -> int | None:
+    try:
+        text = path.read_text().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def available_memory(root: str | os.PathLike = "/") -> tuple[int, str]:
+    """``(bytes, where from)``: the memory a new allocation can still get.
+
+    ``MemAvailable`` of ``/proc/meminfo``, capped by the cgroup's limit minus its usage (v2
+    ``memory.max`` / ``memory.current``, v1 ``memory.limit_in_bytes`` / ``memory.usage_in_bytes``);
+    ``root`` prefixes the paths (tests give a fake tree).
+    """
+    base = Path(root)
+    avail, source = None, "MemAvailable"
+    try:
+        for line in (base / "proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                avail = int(line.split()[1]) * 1024
+                break
+    except OSError:
+        pass
+    cg = base / "sys/fs/cgroup"
+    for limit_f, usage_f, name in ((cg / "memory.max", cg / "memory.current", "cgroup v2 memory.max"),
+                                   (cg / "memory/memory.limit_in_bytes", cg / "memory/memory.usage_in_bytes",
+                                    "cgroup v1 memory.limit_in_bytes")):
+        limit, usage = _read_int(limit_f), _read_int(usage_f)
+        if limit is not None and limit < 1 << 60:  # "max" or a near-2^63 value: no limit
+            free = max(0, limit - (usage or 0))
+            if avail is None or free < avail:
+                avail, source = free, f"{name} - usage"
+            break
+    if avail is None:
+        return 0, "unknown"
+    return avail, source
+
+
+def check(est: Estimate, *, max_memory_frac: float = 0.8, max_hours: float = 24.0, what: str = "this run",
+          available: tuple[int, str] | None = None) -> None:
+    """Raise :class:`ResourceError` (one line: the estimate, the budget and the overrides) when ``est``
+    needs more than ``max_memory_frac`` of the available memory or more than ``max_hours``."""
+    avail, source = available if available is not None else available_memory()
+    budget = int(max_memory_frac * avail)
+    if avail > 0 and est.peak_bytes > budget:
+        raise ResourceError(
+            f"{what} needs {est.describe()}; more than the memory budget {fmt_bytes(budget)} "
+            f"({max_memory_frac:g} x {fmt_bytes(avail)} available, {source}): use fewer members or pixels, or "
+            f"override with resources.max_memory_frac=... or resources.check=false")
+    if est.seconds > max_hours * 3600:
+        raise ResourceError(
+            f"{what} needs {est.describe()}; more than the time budget of {max_hours:g} h: use fewer epochs, "
+            f"members or pixels, or override with resources.max_hours=... or resources.check=false")
+
+
+def fmt_bytes(b: float) -> str:
+    for unit, size in (("GiB", GIB), ("MiB", 1 << 20)):
+        if b >= size:
+            return f"{b / size:.1f} {unit}"
+    return f"{b / 1024:.0f} KiB"
+
+
+def fmt_seconds(s: float) -> str:
+    if s >= 86400 * 365:
+        return f"{s / (86400 * 365):.2g} years"
+    if s >= 86400:
+        return f"{s / 86400:.1f} days"
+    if s >= 3600:
+        return f"{s / 3600:.1f} h"
+    if s >= 60:
+        return f"{s / 60:.1f} min"
+    return f"{s:.1f} s"
