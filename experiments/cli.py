@@ -10,10 +10,12 @@ left to Hydra.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import difflib
 import sys
 import typing
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -123,6 +125,37 @@ def check_overrides(argv: list[str], schema: type) -> str | None:
     return None
 
 
+@contextlib.contextmanager
+def interruptible(out_dir: Path | None) -> Iterator[None]:
+    """SIGINT / SIGTERM stop the job between epochs, chunks and members (:mod:`somtorch.interrupt`):
+    one line on stderr, ``FAILED`` in ``out_dir`` (staging folders and the lock are removed by the
+    ``finally`` blocks the exception runs through), exit status 130 / 143."""
+    import shutil
+
+    from somtorch import interrupt
+
+    interrupt.reset()
+    interrupt.install()
+    try:
+        yield
+    except interrupt.Interrupted as e:
+        where = f" {e.where}" if e.where else ""
+        tail = "partial results not written"
+        if out_dir is not None and out_dir.is_dir():
+            for stale in out_dir.glob(".partial-*"):
+                shutil.rmtree(stale, ignore_errors=True)
+            (out_dir / "FAILED").write_text(f"interrupted ({e.signal_name}){where}; {tail}\n")
+            tail += f"; {out_dir / 'FAILED'}"
+        msg = f"interrupted ({e.signal_name}){where}; {tail}"
+        import logging
+
+        from experiments.schema import log_to_file
+
+        log_to_file(logging.getLogger("somtorch"), logging.WARNING, "%s", msg)
+        print(msg, file=sys.stderr)
+        raise SystemExit(e.exit_code) from None
+
+
 def run_checked(main: Any, schema: type, argv: list[str] | None = None) -> Any:
     """Check ``sys.argv`` against ``schema``, then call the Hydra ``main``; a bad key exits with
     status 2 and one line on stderr."""
@@ -136,7 +169,16 @@ def run_checked(main: Any, schema: type, argv: list[str] | None = None) -> Any:
     if err is not None:
         print(f"error: {err}", file=sys.stderr)
         raise SystemExit(2)
-    return main()
+    from somtorch.interrupt import Interrupted
+
+    try:
+        return main()
+    except Interrupted as e:  # outside a job (between the jobs of a multirun): no folder to mark
+        print(f"interrupted ({e.signal_name}) {e.where or 'between jobs'}".rstrip(), file=sys.stderr)
+        raise SystemExit(e.exit_code) from None
+    except KeyboardInterrupt:  # before a job installed the handler (start-up)
+        print("interrupted (SIGINT) during start-up", file=sys.stderr)
+        raise SystemExit(130) from None
 
 
 def quiet() -> bool:

@@ -82,16 +82,17 @@ def load_input(cfg: RunConfig):
     return scene
 
 
-def check_resources(scene, cfg: RunConfig, what: str, times: float = 1) -> None:
-    """Refuse (:class:`somtorch.resources.ResourceError`, one line) a job on ``scene`` that would need
-    more memory or time than ``cfg.resources`` allows; run ``times`` times over. Logs the estimate."""
+def check_resources(jobs: list, resources, what: str) -> None:
+    """Refuse (:class:`somtorch.resources.ResourceError`, one line) work that would need more memory or
+    time than ``resources`` (a :class:`~somtorch.config.ResourcesConfig`) allows. ``jobs``: ``(scene,
+    pipeline config, times)`` run one after another (peak: the largest; time: the sum)."""
     from somtorch.pipeline import resource_estimate
-    from somtorch.resources import check
+    from somtorch.resources import check, combine
 
-    est = resource_estimate(scene, cfg).times(times)
+    est = combine([resource_estimate(scene, c).times(n) for scene, c, n in jobs])
     log.debug("%s: estimated %s", what, est.describe())
-    if cfg.resources.check:
-        check(est, max_memory_frac=cfg.resources.max_memory_frac, max_hours=cfg.resources.max_hours, what=what)
+    if resources.check:
+        check(est, max_memory_frac=resources.max_memory_frac, max_hours=resources.max_hours, what=what)
 
 
 def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> dict:
@@ -102,6 +103,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     """
     import torch
 
+    from somtorch import interrupt
     from somtorch.atomic import commit_staged, write_json
     from somtorch.outputs import summarize, write_maps, write_point_clouds
     from somtorch.pipeline import run_pipeline
@@ -113,7 +115,8 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     scene = load_input(cfg)
     if cfg.object_id is not None and scene.objects is None:
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
-    check_resources(scene, cfg, f"scene {scene.name} ({scene.width}x{scene.height}, ensemble={cfg.runs})")
+    check_resources([(scene, cfg, 1)], cfg.resources,
+                    f"scene {scene.name} ({scene.width}x{scene.height}, ensemble={cfg.runs})")
     out_dir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     writer = None
@@ -134,6 +137,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
         if result.ground is not None:
             metrics["ground_plane"] = result.ground.as_dict()
         if cfg.output.maps:
+            interrupt.note("while writing the pictures")
             bar.set_postfix_str("maps")
             pics = write_maps(scene, result, stage, member=cfg.output.member)
             bar.update()
@@ -141,6 +145,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
                 for name, img in pics.items():
                     writer.add_image(f"maps/{name}", torch.from_numpy(img).permute(2, 0, 1), 0)
         if cfg.output.pointcloud:
+            interrupt.note("while writing the point clouds")
             bar.set_postfix_str("point clouds")
             metrics["pointcloud"] = write_point_clouds(
                 scene, result, stage, member=cfg.output.member, voxel_size=cfg.output.voxel_size,
@@ -195,25 +200,24 @@ def main(dcfg: DictConfig) -> dict:
     from experiments.cli import configure_threads
 
     configure_threads()
+    from experiments.cli import interruptible, quiet
     from experiments.schema import one_line_errors
-    from somtorch.atomic import exclusive_folder, exit_cleanly_on_sigterm
+    from somtorch.atomic import exclusive_folder
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    from experiments.cli import quiet
 
     if quiet():  # the console shows warnings and errors only; run.log keeps everything
         for h in logging.getLogger().handlers:
             if isinstance(h, logging.StreamHandler) and not isinstance(h, logging.FileHandler):
                 h.setLevel(logging.WARNING)
     try:
-        with one_line_errors(log):
+        with interruptible(out_dir), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
             cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
-            exit_cleanly_on_sigterm()  # a killed run removes its staging folder
             out_dir.mkdir(parents=True, exist_ok=True)
             with exclusive_folder(out_dir):  # two runs never write into one folder
                 return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
     except SystemExit as e:
-        if e.code and out_dir.is_dir() and not (out_dir / "metrics.json").exists():
+        if e.code and out_dir.is_dir() and not (out_dir / "metrics.json").exists() and not (out_dir / "FAILED").exists():
             # the folder Hydra created holds only its config and the log: mark it, so that nobody
             # (and no aggregate) takes it for a run
             (out_dir / "FAILED").write_text(f"this run failed (exit status {e.code}); the error is in run.log\n")

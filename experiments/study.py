@@ -47,7 +47,6 @@ from omegaconf import DictConfig, OmegaConf
 from experiments.run import CONF_DIR, load_input
 from experiments.schema import RunConfig, register
 from experiments.metrics_schema import SCHEMA, config_hash
-from somtorch.atomic import exit_cleanly_on_sigterm
 from somtorch.evaluation import merge_runs, per_object_scores, run_records, summarize_runs
 
 log = logging.getLogger("somtorch.study")
@@ -125,6 +124,13 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
     obj_mask = None
     if scene.objects is not None:
         obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
+    from experiments.run import check_resources
+
+    separate = cfg.execution == "separate" and cfg.runs > 1
+    job = dataclasses.replace(cfg, ensemble=1) if separate else cfg
+    check_resources([(scene, job, (cfg.runs if separate else 1) * (cfg.repeats + (cfg.repeats > 1)))],
+                    cfg.resources, f"job {out_dir.name} ({scene.name} {scene.width}x{scene.height}, "
+                                   f"{cfg.runs} runs, {cfg.execution})")
     out_dir.mkdir(parents=True, exist_ok=True)
     for stale in out_dir.glob(".partial-*"):  # left by a killed attempt of this same job
         shutil.rmtree(stale, ignore_errors=True)
@@ -252,13 +258,14 @@ def _write_tensorboard(writer, cfg: StudyConfig, metrics: dict[str, Any]) -> Non
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="study")
 def main(dcfg: DictConfig) -> float:
     """Hydra entry point; returns the job's objective (``summary.tradeoff``; 0 without an object mask)."""
-    from experiments.cli import configure_threads
+    from experiments.cli import configure_threads, interruptible
+    from experiments.schema import one_line_errors
 
     configure_threads()
-    cfg: StudyConfig = OmegaConf.to_object(dcfg)
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    exit_cleanly_on_sigterm()
-    metrics = execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
+    with interruptible(out_dir), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED in the job's folder
+        cfg: StudyConfig = OmegaConf.to_object(dcfg)
+        metrics = execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
     return float(metrics["summary"].get("tradeoff", 0.0))
 
 

@@ -224,6 +224,13 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     caches = []
     for spec in specs:  # every file is read (and every map computed) before any training
         caches.append(SceneCache(spec, load_dev_scene(spec, data_dir), base))
+    from experiments.run import check_resources
+
+    upstream = 1 + sum(len(v) for k, v in grid.items() if k.split(".")[0] in UPSTREAM)
+    candidates = 1 + sum(len(v) for v in grid.values())
+    # one segmentation per upstream setting; the object step once per candidate
+    check_resources([(c.scene, base, upstream) for c in caches] + [(c.scene, base, candidates) for c in caches],
+                    cfg.resources, f"validation over {len(caches)} scenes x {candidates} candidates")
     t0 = time.perf_counter()
     for c in caches:
         c.score({})
@@ -333,15 +340,15 @@ ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="validate")
 def main(dcfg: DictConfig) -> int:
-    from experiments.cli import configure_threads
+    from experiments.cli import configure_threads, interruptible
 
     configure_threads()
     from experiments.schema import one_line_errors
     from somtorch.atomic import write_staged
 
-    with one_line_errors(log):
+    out = Path(HydraConfig.get().runtime.output_dir)
+    with interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
         cfg: ValidateConfig = OmegaConf.to_object(dcfg)
-        out = Path(HydraConfig.get().runtime.output_dir)
         report = evaluate(cfg)
     write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": report})
     t = report["totals"]

@@ -19,6 +19,7 @@ if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
 
     maybe_print_help("video")
 
+import dataclasses
 import glob
 import logging
 import statistics
@@ -90,19 +91,28 @@ def main(dcfg: DictConfig) -> dict:
     from experiments.cli import configure_threads
 
     configure_threads()
+    from experiments.cli import interruptible
     from experiments.schema import one_line_errors
+    from somtorch import interrupt
     from somtorch.atomic import write_staged
     from somtorch.video import SequenceRunner
 
-    with one_line_errors(log):
+    out = Path(HydraConfig.get().runtime.output_dir)
+    with interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
         cfg: VideoConfig = OmegaConf.to_object(dcfg)
         s = cfg.sequence
         runner = SequenceRunner(cfg, warm=s.warm, warm_epochs=s.warm_epochs, warm_sigma=s.warm_sigma,
                                 ground_keep=s.ground_keep, ground_every=s.ground_every)
         frames, n = frames_of(cfg)
-        out = Path(HydraConfig.get().runtime.output_dir)
         rows, t0 = [], time.perf_counter()
-        for scene in frames:
+        for i, scene in enumerate(frames):
+            if i == 0:  # every frame has the size of the first: a cold frame, then warm ones
+                from experiments.run import check_resources
+
+                warm = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, epochs=s.warm_epochs))
+                check_resources([(scene, cfg, 1), (scene, warm if s.warm else cfg, n - 1)], cfg.resources,
+                                f"sequence of {n} frames of {scene.width}x{scene.height}")
+            interrupt.checkpoint(f"after frame {i}/{n}")
             r = runner.step(scene)
             m = r.members[0]
             rows.append({"frame": r.index, "warm": r.warm, "ground_reused": r.ground_reused,

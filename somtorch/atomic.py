@@ -64,17 +64,6 @@ def commit_staged(stage: str | os.PathLike, out_dir: str | os.PathLike, last: st
         os.replace(entry, target)
 
 
-def exit_cleanly_on_sigterm() -> None:
-    """Make SIGTERM (``kill``, SLURM pre-emption) raise ``SystemExit``, so ``finally`` blocks run and
-    staging folders are removed. Only possible in the main thread (launchers may run jobs elsewhere)."""
-    import signal
-    import sys
-    import threading
-
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
-
-
 @contextlib.contextmanager
 def exclusive_folder(folder: str | os.PathLike, name: str = ".lock") -> Iterator[Path]:
     """Hold ``folder/name`` (created exclusively) while the block runs: a second writer of the same

@@ -20,6 +20,7 @@ from typing import Any
 
 import torch
 
+from . import interrupt
 from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, PipelineConfig, ReductionConfig,
                      SOMConfig, TrainConfig)
 from .core import SOM
@@ -83,6 +84,7 @@ class _Timer:
 
     @contextmanager
     def __call__(self, stage: str) -> Iterator[None]:
+        interrupt.checkpoint(f"during stage {stage}")
         t0 = time.perf_counter()
         try:
             yield
@@ -179,6 +181,7 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
     r = cfg.reduction
     members = []
     for e in range(seg.labels.shape[0]):
+        interrupt.checkpoint(f"in the object step, member {e + 1}/{seg.labels.shape[0]}")
         with timer("objects"):
             found = find_objects(labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, ocfg,
                                  None if seg.ref_color is None else seg.ref_color[e])
@@ -282,9 +285,11 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     """
     cfg = cfg or PipelineConfig()
     timer = _Timer()
-    valid, ground, usable, feats, train = prepare(scene, cfg, timer)
-    seg = run_segmenter(feats, train, scene, usable, cfg, progress=progress, log_training=log_training, timer=timer)
-    members = detect(scene, seg, ground, cfg, timer)
+    with interrupt.deferred():  # SIGINT / SIGTERM stop it between epochs, chunks, members (somtorch.interrupt)
+        valid, ground, usable, feats, train = prepare(scene, cfg, timer)
+        seg = run_segmenter(feats, train, scene, usable, cfg, progress=progress, log_training=log_training,
+                            timer=timer)
+        members = detect(scene, seg, ground, cfg, timer)
     runs = seg.labels.shape[0]
     qe = te = torch.full((runs,), float("nan"))
     if metrics and seg.som is not None:

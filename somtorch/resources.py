@@ -9,9 +9,11 @@ big tensors each stage holds at its peak:
   ``(E, K, D + 1)`` (a few copies), and for the online / mini-batch rules the per-member sample order
   ``(E, N_train)`` int64 and one block of samples ``(E, S, D)``;
 * labelling (BMU of every pixel): the label maps ``(E, H, W)`` int64 plus the BMU indices
-  ``(E, N)`` int64 they are scattered from;
+  ``(E', N)`` int64 of one group of members, scattered into them;
 * object step: the label maps (still held) plus their strided copy ``(E, H/s, W/s)`` int64 and the
-  per-map work buffers (``~64 B`` per read pixel).
+  per-map work buffers (``~64 B`` per read pixel);
+* the errors of the trained maps: the top-2 BMUs of the training pixels ``(E, N_train, 2)`` int64
+  and their masks (the label maps still held).
 
 The peak is the largest stage plus what every stage holds (features, scene, chunk buffers). It
 is the memory *added* to the process that calls it (the imported libraries are already resident),
@@ -34,7 +36,7 @@ from pathlib import Path
 
 from .validation import SomtorchError
 
-__all__ = ["Estimate", "ResourceError", "available_memory", "check", "estimate", "fmt_bytes", "fmt_seconds"]
+__all__ = ["Estimate", "ResourceError", "available_memory", "check", "combine", "estimate", "fmt_bytes", "fmt_seconds"]
 
 GIB = 1 << 30
 _FIXED = 96 << 20  # allocator slack, chunk buffers of the BMU search (16 MiB of scores, a few of them)
@@ -85,7 +87,7 @@ class Estimate:
 
 def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, units: int = 64, members: int = 1,
              epochs: int = 10, mode: str = "batch", batch_size: int = 256, map_stride: int = 1,
-             method: str = "som", iterations: int = 20) -> Estimate:
+             method: str = "som", iterations: int = 20, metrics: bool = True) -> Estimate:
     """Predicted peak memory and time of one pipeline call (see the module docstring).
 
     Args:
@@ -95,6 +97,7 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
         map_stride: the object step reads every ``map_stride``-th pixel in y and x.
         method: the segmenter (``som``, ``minisom``, ``kmeans``, ``slic``, ``felzenszwalb``).
         iterations: k-means iterations.
+        metrics: the quantization and topographic errors are computed (``run_pipeline(metrics=True)``).
 
     >>> e = estimate(height=500, width=741, valid=343_274, train=1_979, members=400, map_stride=2)
     >>> 1.9 < e.peak_bytes / 2**30 < 3.0
@@ -123,14 +126,25 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
         if method == "minisom":
             train_s = e * epochs * nt * _T_MINISOM
         train_b += min(e * nt * k, _CHUNK) * 4 * 3  # one chunk of distances (and its argmin)
-    label_b = e * (hw + n) * 8 + min(e * n * k, _CHUNK) * 4 * 3
+    per = min(e, max(1, (1 << 27) // max(1, n * k)))  # somtorch.tasks.segmentation.members_per_call
+    label_b = e * hw * 8 + per * n * 8 + min(per * n * k, _CHUNK) * 4 * 3
     label_s = e * n * k * _T_LABEL
     read = math.ceil(height / map_stride) * math.ceil(width / map_stride)
     objects_b = e * hw * 8 + (e * read * 8 if map_stride > 1 else 0) + read * 64 + hw * 24
     objects_s = e * (read * _T_OBJECT + _T_MEMBER)
-    peak = feats + _FIXED + max(train_b, label_b, objects_b)
+    # quantization / topographic error of the trained maps: top-2 BMUs (E, N_train, 2) int64 and masks
+    metrics_b = e * hw * 8 + (e * nt * 36 if metrics and method in ("som", "minisom") else 0)
+    peak = feats + _FIXED + max(train_b, label_b, objects_b, metrics_b)
     return Estimate(int(train_b), int(label_b), int(objects_b), int(peak), float(train_s), float(label_s),
                     float(objects_s))
+
+
+def combine(estimates: list[Estimate]) -> Estimate:
+    """Jobs run one after another in one process: the largest peak, the summed time."""
+    return Estimate(max(e.train_bytes for e in estimates), max(e.label_bytes for e in estimates),
+                    max(e.objects_bytes for e in estimates), max(e.peak_bytes for e in estimates),
+                    sum(e.train_s for e in estimates), sum(e.label_s for e in estimates),
+                    sum(e.objects_s for e in estimates))
 
 
 def _read_int(path: Path) -> int | None:

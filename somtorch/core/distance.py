@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import torch
 
+from .. import interrupt
 from .native import native_bmu
 
 DEFAULT_CHUNK_ELEMENTS = 1 << 22  # scores per chunk (16 MiB in float32)
@@ -61,6 +62,7 @@ def bmu_search(x: torch.Tensor, weight: torch.Tensor, *, k: int = 1,
     out = torch.empty((e, n) if k == 1 else (e, n, k), dtype=torch.long, device=weight.device)
     step = _chunk_rows(n, e * kk, chunk_elements)
     for s in range(0, n, step):
+        interrupt.checkpoint()  # a pending SIGINT / SIGTERM stops the search here (somtorch.interrupt)
         xs = x[s:s + step] if x.ndim == 2 else x[:, s:s + step]
         sc = _scores(xs, weight, wsq)
         if k == 1:

@@ -22,6 +22,7 @@ from typing import Any, Union
 import numpy as np
 import torch
 
+from .. import interrupt
 from ..config import TrainConfig
 from .decay import DECAYS
 from .grid import default_sigma
@@ -76,6 +77,7 @@ def epoch_sums(weight: torch.Tensor, sources: Sequence[Source], chunk_size: int
                 raise ValueError(f"a chunk must be (n, {d}); got shape {tuple(chunk.shape)}")
             if chunk.shape[0] == 0:
                 continue
+            interrupt.checkpoint()
             s, c = accumulate(chunk.to(weight.device), weight)
             part_s += s.double()
             part_c += c.double()
@@ -129,8 +131,9 @@ def fit_batch_chunked(som: Any, sources: Source | Sequence[Source], *, epochs: i
     decay = [DECAYS[sigma_decay]] * ens
     nb = NEIGHBORHOODS[neighborhood]
     grid_d2 = som.grid_d2.double()
-    with torch.no_grad():
+    with torch.no_grad(), interrupt.deferred():  # a signal stops the epoch at its next chunk
         for ep in range(epochs):
+            interrupt.checkpoint(f"after epoch {ep}/{epochs}")
             sig = _member_schedule(decay, p0, p1, ep, ep + 1, epochs)[0]  # the radius of SOM.fit's batch map
             sums, counts, seen = epoch_sums(w, sources, chunk_size)
             if all_reduce is not None:

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import torch
 
+from .. import interrupt
 from .decay import DecayFn, schedule
 from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search
 from .native import native_accumulate, native_online
@@ -238,6 +239,11 @@ def batch_step(weight: torch.Tensor, x: torch.Tensor, lr: torch.Tensor | None, s
 
 
 # ----------------------------------------------------------------------------- the engine
+def _epochs(x: float) -> str:
+    """Epochs for a message: ``3`` or ``2.4`` (the online rule stops within an epoch)."""
+    return f"{x:.0f}" if abs(x - round(x)) < 1e-9 else f"{x:.1f}"
+
+
 def _blocks(total: int, size: int, every: int | None) -> Iterator[tuple[int, int]]:
     """Consecutive ``(start, stop)`` ranges of at most ``size`` steps that also end at every multiple
     of ``every`` (so that callbacks fire exactly there)."""
@@ -271,8 +277,9 @@ def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_s
     block = BLOCK_STEPS if mode == "online" else 1
     cut_every = every if every else (n if mode == "online" else None)
     bar = tqdm(total=steps, desc=desc, unit="step", disable=not progress, delay=0.5, leave=False)
+    epochs_total = planned * per_step / n
     try:
-        with torch.no_grad():
+        with torch.no_grad(), interrupt.deferred():  # a signal stops the loop at the next block's end
             for start, stop in _blocks(steps, block, cut_every if callback is not None else None):
                 lr, sigma = sched.values(offset + start, offset + stop, planned)  # (S, E)
                 if mode == "online":
@@ -286,6 +293,8 @@ def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_s
                         xs = xs[0]  # one order shared by all members: shared samples (B, D)
                     batch_step(weight, xs, lr[0], sigma[0], grid_d2, neighborhood)
                 bar.update(stop - start)
+                interrupt.checkpoint(f"after epoch {_epochs((offset + stop) * per_step / n)}/"
+                                     f"{_epochs(epochs_total)}")
                 if every:
                     fire = stop % every == 0
                 else:  # once per completed epoch

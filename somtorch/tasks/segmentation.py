@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import torch
 
+from .. import interrupt
 from ..core.distance import DEFAULT_CHUNK_ELEMENTS, bmu_search
 from ..validation import check_tensor
 
@@ -32,8 +33,17 @@ def segment(weight: torch.Tensor, x: torch.Tensor, pixels: torch.Tensor, shape: 
     h, w = shape
     labels = torch.full((weight.shape[0], h * w), -1, dtype=torch.long, device=weight.device)
     flat = pixels[:, 0] * w + pixels[:, 1]
-    labels[:, flat] = bmu_search(x, weight, chunk_elements=chunk_elements)
+    per = members_per_call(x.shape[0], weight.shape[1])
+    for e0 in range(0, weight.shape[0], per):  # members in groups: a signal stops between them
+        interrupt.checkpoint()
+        labels[e0:e0 + per, flat] = bmu_search(x, weight[e0:e0 + per], chunk_elements=chunk_elements)
     return labels.view(-1, h, w)
+
+
+def members_per_call(n: int, k: int, work: int = 1 << 27) -> int:
+    """Members whose BMU search :func:`segment` does in one call: about ``work`` distances (a
+    fraction of a second), so that an interrupt is honoured quickly and the ``(E', N)`` indices stay small."""
+    return max(1, work // max(1, n * k))
 
 
 def grey_map(labels: torch.Tensor, ref_disparity: torch.Tensor) -> torch.Tensor:

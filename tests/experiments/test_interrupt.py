@@ -1,0 +1,79 @@
+"""SIGINT / SIGTERM during a real run: one line, FAILED, no partial results, exit 130 / 143, fast."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _wait_for(pred, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def _start(args: list[str]) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", *args], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_run_stops_cleanly_on_a_signal(tmp_path, sig, code):
+    folder = tmp_path / "r"
+    # ~100 s of batch-map epochs on the embedded scene: long enough to be interrupted in training
+    p = _start(["experiments.run", "ensemble=20", "train.epochs=100000", "output.tensorboard=false",
+                f"hydra.run.dir={folder}"])
+    try:
+        assert _wait_for(lambda: any(folder.glob(".partial-*")), 120), "the run never started its work"
+        time.sleep(6)  # into the training epochs (scene, ground plane and features take ~1 s unloaded)
+        assert p.poll() is None
+        t0 = time.monotonic()
+        p.send_signal(sig)
+        _, err = p.communicate(timeout=60)
+        took = time.monotonic() - t0
+    finally:
+        p.kill()
+    assert p.returncode == code, err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    name = signal.Signals(sig).name
+    assert lines[0].startswith(f"interrupted ({name}) after epoch "), lines[0]
+    assert lines[0].endswith(f"/100000; partial results not written; {folder / 'FAILED'}"), lines[0]
+    assert (folder / "FAILED").read_text().startswith(f"interrupted ({name})")
+    assert not list(folder.glob(".partial-*")) and not (folder / ".lock").exists()
+    assert not (folder / "metrics.json").exists()
+    assert took < 5.0, took  # honoured at the next epoch (milliseconds); the rest is the exit (2 shared cores)
+
+
+@pytest.mark.slow
+def test_study_stops_cleanly_on_sigint(tmp_path):
+    folder = tmp_path / "s"
+    p = _start(["experiments.study", "ensemble=20", "train.epochs=100000", "output.tensorboard=false",
+                "output.maps=false", f"hydra.run.dir={folder}"])
+    try:
+        assert _wait_for(lambda: any(folder.glob(".partial-*")), 120), "the job never started its work"
+        time.sleep(6)
+        t0 = time.monotonic()
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+        took = time.monotonic() - t0
+    finally:
+        p.kill()
+    assert p.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    assert err.strip().splitlines()[-1].startswith("interrupted (SIGINT) after epoch "), err
+    assert (folder / "FAILED").exists() and not list(folder.glob(".partial-*"))
+    assert took < 5.0, took
