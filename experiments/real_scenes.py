@@ -82,7 +82,7 @@ def score_scene(scene: Any, members: list, cfg: ScenesConfig) -> dict[str, Any]:
     row: dict[str, Any] = {"runs": len(members), "no_object": sum(bool(m.no_object) for m in members),
                            "kept_areas_mean": sum(len(m.kept) for m in members) / len(members)}
     purity = [m.kept[0].purity for m in found if m.kept[0].purity is not None]
-    solid = [m.kept[0].solidity for m in found if m.kept[0].solidity is not None]
+    solid = [m.kept[0].solidity_rel for m in found if m.kept[0].solidity_rel is not None]
     row.update({"low_purity": sum(p < cfg.junk_bound for p in purity),
                 "low_solidity": sum(s < cfg.junk_bound for s in solid),
                 "median_purity": _median(purity), "median_solidity": _median(solid)})

@@ -109,10 +109,17 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     from somtorch.pipeline import run_pipeline
 
     t_start = time.perf_counter()
+    out_t: dict[str, float] = {}  # seconds spent writing each kind of output
+
+    def timed(kind: str):
+        t0 = time.perf_counter()
+        return lambda: out_t.__setitem__(kind, out_t.get(kind, 0.0) + time.perf_counter() - t0)
+
     if not 0 <= cfg.output.member < cfg.runs:  # checked before any file is read
         raise ValueError(f"output.member={cfg.output.member} must be in [0, runs={cfg.runs}) (ensemble="
                          f"{cfg.ensemble}, method={cfg.method!r})")
     scene = load_input(cfg)
+    t_load = time.perf_counter() - t_start
     if cfg.object_id is not None and scene.objects is None:
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
     check_resources([(scene, cfg, 1)], cfg.resources,
@@ -122,8 +129,10 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     writer = None
     try:
         if cfg.output.tensorboard:
+            done = timed("tensorboard")
             from torch.utils.tensorboard import SummaryWriter
             writer = SummaryWriter(str(stage / "tb"))
+            done()
         from tqdm.auto import tqdm
 
         from experiments.cli import show_progress
@@ -139,25 +148,41 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
         if cfg.output.maps:
             interrupt.note("while writing the pictures")
             bar.set_postfix_str("maps")
+            done = timed("maps")
             pics = write_maps(scene, result, stage, member=cfg.output.member)
+            done()
             bar.update()
             if writer is not None:
+                done = timed("tensorboard")
                 for name, img in pics.items():
                     writer.add_image(f"maps/{name}", torch.from_numpy(img).permute(2, 0, 1), 0)
+                done()
         if cfg.output.pointcloud:
             interrupt.note("while writing the point clouds")
             bar.set_postfix_str("point clouds")
+            done = timed("point_clouds")
             metrics["pointcloud"] = write_point_clouds(
                 scene, result, stage, member=cfg.output.member, voxel_size=cfg.output.voxel_size,
                 render=cfg.output.render, render_backend=cfg.output.render_backend)
+            done()
         bar.close()
         if cfg.output.checkpoint and result.som is not None:
+            done = timed("checkpoint")
             result.som.save(stage / "som.safetensors")
+            done()
         if writer is not None:
+            done = timed("tensorboard")
             _log_hparams(writer, cfg, metrics)
             writer.close()
             writer = None
-        metrics["timings_s"]["total"] = time.perf_counter() - t_start
+            done()
+        # the stages of the pipeline (compute) apart from writing pictures and files (output)
+        metrics["timings_s"] = {"load": t_load, **metrics["timings_s"]}
+        metrics["output_timings_s"] = out_t
+        total = time.perf_counter() - t_start
+        compute, output = sum(metrics["timings_s"].values()), sum(out_t.values())
+        metrics["wall_s"] = {"compute": compute, "output": output, "other": max(0.0, total - compute - output),
+                             "total": total}
         write_json(stage / "metrics.json", metrics)
         commit_staged(stage, out_dir)  # metrics.json last: its presence marks a complete run
     finally:
@@ -165,15 +190,21 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
             writer.close()
         shutil.rmtree(stage, ignore_errors=True)
     s = metrics.get("summary")
-    log.info("scene %s: %d valid px, %d train px, timings %s", scene.name, scene.n_valid,
-             metrics["pixels"]["train"], {k: round(v, 4) for k, v in metrics["timings_s"].items()})
+    w = metrics["wall_s"]
+    log.info("scene %s: %d valid px, %d train px; %.1f s: compute %.1f s %s, output %.1f s %s", scene.name,
+             scene.n_valid, metrics["pixels"]["train"], w["total"], w["compute"],
+             {k: round(v, 3) for k, v in metrics["timings_s"].items()}, w["output"],
+             {k: round(v, 2) for k, v in out_t.items()})
     m0 = metrics["members"][cfg.output.member]
     log.info("member %d: %d areas, kept %d, reduction %.1f %% (union), %.1f %% (crops)", cfg.output.member,
              m0["n_areas"], len(m0["kept_areas"]), m0["reduction_union"], m0["reduction_crops"])
     if s:
         log.info("object: identified_100 %d/%d, identified_95 %d/%d, useful hits %d, x_opt %.1f %%",
                  s["identified_100"], s["runs"], s["identified_95"], s["runs"], s["useful_hits"], s["x_opt"])
-    log.info("outputs in %s", out_dir)
+    from experiments.schema import log_to_file
+
+    log_to_file(log, logging.INFO, "outputs in %s", out_dir)
+    print(f"outputs in {out_dir}", flush=True)  # always, --quiet too: where the results are
     return metrics
 
 

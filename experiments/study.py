@@ -106,7 +106,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
     from somtorch import __version__
     from somtorch.atomic import commit_staged, write_json
     from somtorch.disparity.resize import resize_scene
-    from somtorch.outputs import write_maps
+    from somtorch.outputs import train_strides, write_maps
     from somtorch.pipeline import run_pipeline
 
     chash = config_hash(config)
@@ -183,7 +183,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
                       "valid_pixels": scene.n_valid, "has_objects": scene.objects is not None,
                       "object_id": cfg.object_id, "source": scene.source},
             "pixels": {"train": len(results[0].train_features), "segmented": len(results[0].features),
-                       "train_stride": cfg.features.train_stride},
+                       **train_strides(scene, results[0])},
             "ground_found": results[0].ground is not None,
             "runs": runs, "summary": summarize_runs(runs, x_opt),
             "per_object": per_object_scores(scene, results) if scene.objects is not None else {},
@@ -194,10 +194,16 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
                     "native_kernel": os.environ.get("SOMTORCH_NATIVE", "1") != "0"},
             "config": config,
         }
+        out_t: dict[str, float] = {}  # writing pictures and files, apart from the compute in timings_s
         if cfg.output.maps:
+            t0 = time.perf_counter()
             write_maps(scene, results[0], stage, member=0)
+            out_t["maps"] = time.perf_counter() - t0
         if cfg.output.tensorboard:  # written and closed before anything moves out of the staging folder
+            t0 = time.perf_counter()
             _tensorboard(stage, cfg, metrics)
+            out_t["tensorboard"] = time.perf_counter() - t0
+        metrics["output_timings_s"] = out_t
         metrics["wall_s"] = time.perf_counter() - t_start
         write_json(stage / "metrics.json", metrics)
         commit_staged(stage, out_dir)  # metrics.json last: its presence marks a complete job

@@ -43,7 +43,7 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "kept_areas": [{"neurons": a.neurons, "pixels": a.pixels, "box_xyxy": list(a.box),
                             "mean_disparity": a.mean_disparity, "contrast": a.contrast,
                             "area_frac": a.area_frac,
-                            **{k: _finite(getattr(a, k)) for k in ("purity", "solidity", "confidence")}}
+                            **{k: _finite(getattr(a, k)) for k in ("purity", "solidity", "solidity_rel", "confidence")}}
                            for a in m.kept],
             "kept_boxes_xyxy": [list(b) for b in m.reduction.boxes],
             "kept_valid_union": m.reduction.kept_union,
@@ -62,7 +62,7 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
                   "ground_pixels": int(result.ground.mask.sum()) if result.ground is not None else 0,
                   "has_objects": scene.objects is not None, "source": scene.source},
         "pixels": {"train": len(result.train_features), "segmented": len(result.features),
-                   "train_stride": result.train_features.stride},
+                   **train_strides(scene, result)},
         "timings_s": dict(result.timings),
         "members": members,
     }
@@ -83,6 +83,22 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
         }
     if config is not None:
         out["config"] = config
+    return out
+
+
+def train_strides(scene: Scene, result: PipelineResult) -> dict[str, Any]:
+    """The configured ``features.train_stride``, the one used on this scene and why they differ."""
+    used = result.train_features.stride
+    out: dict[str, Any] = {"train_stride": used, "train_stride_effective": used}
+    f = result.config.features if result.config is not None else None
+    if f is not None:
+        out["train_stride"] = f.train_stride
+        if used != f.train_stride:
+            out["train_stride_reason"] = (
+                f"features.train_stride={f.train_stride} is counted on an image of features.reference_pixels="
+                f"{f.reference_pixels} px; at {scene.width}x{scene.height} it becomes {used} (x sqrt of the pixel "
+                "ratio, so the share of training pixels does not depend on the resolution; reference_pixels=0: "
+                "strides as given)")
     return out
 
 

@@ -70,6 +70,7 @@ class PipelineResult:
     prototypes: torch.Tensor | None = None  # (E, K, D) feature-space centres (SOM weights, k-means)
 
     segmentation: Segmentation | None = None
+    config: PipelineConfig | None = None  # the config that made it
 
     @property
     def num_segments(self) -> int:
@@ -293,9 +294,11 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     runs = seg.labels.shape[0]
     qe = te = torch.full((runs,), float("nan"))
     if metrics and seg.som is not None:
-        qe, te = seg.som.quantization_error(train.x), seg.som.topographic_error(train.x)
+        with timer("errors"):
+            qe, te = seg.som.quantization_error(train.x), seg.som.topographic_error(train.x)
     elif metrics and seg.prototypes is not None:
         from .core.metrics import quantization_error
-        qe = quantization_error(train.x, seg.prototypes)
+        with timer("errors"):
+            qe = quantization_error(train.x, seg.prototypes)
     return PipelineResult(feats, train, seg.som, seg.labels, seg.ref_disparity, members, timer.t, qe, te, ground,
-                          cfg.method, seg.prototypes, seg)
+                          cfg.method, seg.prototypes, seg, cfg)

@@ -77,7 +77,8 @@ def test_summarize_is_json_ready_with_the_documented_keys(motorcycle, result):
         assert len(mem["kept_areas"]) == len(res.kept) == 1
         kept = mem["kept_areas"][0]
         assert kept["purity"] == res.kept[0].purity and 0 < kept["purity"] <= 1
-        assert kept["solidity"] == res.kept[0].solidity and kept["solidity"] > 0
+        assert kept["solidity"] == res.kept[0].solidity and 0 < kept["solidity"] <= 1
+        assert kept["solidity_rel"] == res.kept[0].solidity_rel > 0
         assert mem["score"] is None
 
 
@@ -177,3 +178,16 @@ def test_areas_picture_tints_the_ground_plane_blue(motorcycle, tmp_path):
     left = motorcycle.image.permute(1, 2, 0).numpy().astype(int)
     gain = (img[..., 2] - left[..., 2])[ground].mean() - (img[..., 0] - left[..., 0])[ground].mean()
     assert gain > 40, f"ground pixels not tinted blue (blue - red gain {gain:.1f})"
+
+
+@pytest.mark.parametrize("name", ["motorcycle", "oakd_stereodemo/desk", "eth3d/terrace"])
+def test_solidity_in_metrics_is_a_share_on_real_scenes(shared_data, name):
+    """``solidity`` (the opened share of an area's pixels) is in [0, 1]; ``solidity_rel`` is it over
+    the map's own share (what objects.min_solidity tests) and may exceed 1."""
+    scene = load_scene(name if name == "motorcycle" else shared_data / name)
+    result = run_pipeline(scene, PipelineConfig(ensemble=8), metrics=False)
+    kept = [a for m in summarize(scene, result)["members"] for a in m["kept_areas"] if a["solidity"] is not None]
+    assert kept  # (areas kept without the checks, e.g. the fail-safe's, carry None)
+    for a in kept:
+        assert 0 <= a["solidity"] <= 1, a
+        assert a["solidity_rel"] >= a["solidity"] - 1e-12  # the map's share is ≤ 1 too

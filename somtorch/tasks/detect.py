@@ -151,7 +151,9 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     ``cfg.max_areas + cfg.purity_candidates − 1`` candidates tried. If none passed: the
     best-ranked candidate, or nothing with ``cfg.fail_safe`` (the caller keeps the whole map).
 
-    Every kept area carries its ``purity``, ``solidity`` (relative to the map's) and
+    Every kept area carries its ``purity``, ``solidity`` (the opened share of its pixels, ≤ 1),
+    ``solidity_rel`` (that share over the map's own, which may exceed 1: the area is more solid than
+    the map) and
     ``confidence`` (rank score over the best candidate's).
 
     Shape:
@@ -181,11 +183,12 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
                               stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
                               clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)
         own = label_mask(lab_s, done.neurons)
-        done = replace(done, purity=box_purity(done, labels, ctx.integral),
-                       solidity=_opened_share(own, square) / ctx.solidity, confidence=confidence)
+        solid = _opened_share(own, square)  # in [0, 1]: the opening keeps a subset of the pixels
+        done = replace(done, purity=box_purity(done, labels, ctx.integral), solidity=solid,
+                       solidity_rel=solid / ctx.solidity, confidence=confidence)
         if first is None:
             first = done
-        if done.purity >= cfg.min_purity and done.solidity >= cfg.min_solidity:
+        if done.purity >= cfg.min_purity and done.solidity_rel >= cfg.min_solidity:
             if kept and cfg.keep_budget < 1:
                 union = reduce_map([a.box for a in kept] + [done.box], ctx.valid, tolerance_px=0.0,
                                    tolerance_frac=0.0, tolerance_image=0.0, integral=ctx.integral)

@@ -94,7 +94,8 @@ class ObjectArea:
     ground_clutter_pieces: int = 0  # pieces left out of the box as ground clutter
     grow_threshold: float | None = None  # disparity threshold of grow_area
     purity: float | None = None  # share of the box's valid pixels that are the area's own
-    solidity: float | None = None  # opened share of its pixels relative to the map's
+    solidity: float | None = None  # share of its pixels an opening keeps (refine.solidity), in [0, 1]
+    solidity_rel: float | None = None  # that share over the map's own (what objects.min_solidity tests)
     confidence: float | None = None  # rank score relative to the best candidate's (1 = best)
     facing: float | None = None  # cos of its disparity plane's tilt from the line of sight
 

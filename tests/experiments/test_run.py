@@ -67,8 +67,18 @@ def test_metrics_json_is_complete(embedded_run):
     m = _strict_json(embedded_run / "metrics.json")
     scene = load_scene("motorcycle")
     assert m["scene"]["name"] == "motorcycle" and m["scene"]["valid_pixels"] == scene.n_valid
-    assert {"features", "train", "segment", "objects", "reduction", "total"} <= set(m["timings_s"])
+    assert {"load", "features", "train", "segment", "objects", "reduction", "errors"} <= set(m["timings_s"])
     assert all(v >= 0 for v in m["timings_s"].values())
+    # compute (the pipeline's stages) apart from writing the outputs; the parts add up to the total
+    assert {"maps", "point_clouds", "checkpoint", "tensorboard"} <= set(m["output_timings_s"])
+    w = m["wall_s"]
+    assert w["compute"] == pytest.approx(sum(m["timings_s"].values()))
+    assert w["output"] == pytest.approx(sum(m["output_timings_s"].values()))
+    assert w["compute"] + w["output"] + w["other"] == pytest.approx(w["total"])
+    assert w["other"] < 0.2 * w["total"] + 0.5  # nothing big left unaccounted
+    # the stride is counted on 640x480: configured 10, 11 on the 741x500 Motorcycle, and the reason
+    assert m["pixels"]["train_stride"] == 10 and m["pixels"]["train_stride_effective"] == 11
+    assert "features.reference_pixels=307200" in m["pixels"]["train_stride_reason"]
     assert len(m["members"]) == 2 and [mem["seed"] for mem in m["members"]] == [0, 1]
     assert all(len(mem["kept_areas"]) == 1 for mem in m["members"])
     assert m["config"]["ensemble"] == 2 and m["config"]["objects"]["select"] == "nearest"

@@ -80,7 +80,7 @@ def test_solidity_test_rejects_ceiling_streaks_on_an_unlabelled_sgbm_scene(share
         members = run_pipeline(scene, PipelineConfig(ensemble=20, objects=AreaConfig(min_solidity=v)),
                                metrics=False).members
         # fail-safe runs keep the whole map (flagged no_object): not junk
-        low[v] = sum(not m.no_object and m.kept[0].solidity < 0.25 for m in members)
+        low[v] = sum(not m.no_object and m.kept[0].solidity_rel < 0.25 for m in members)
     assert low[0.25] <= 2, low
     assert low[0.0] >= 6, low
 
