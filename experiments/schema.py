@@ -89,6 +89,23 @@ class RunConfig(PipelineConfig):
     label: str = "robust"  # a name for the configuration (set by presets; shown in tables)
 
 
+GENERIC_LEFT = ("left", "im0", "image_2", "l", "left_rect", "rect_left", "view1", "img_left", "left_image")
+
+
+def pair_name(left: object) -> str:
+    """The name of a stereo pair: its left file's stem, or the folder's when the stem is generic.
+
+    >>> pair_name("/data/toy/left.png"), pair_name("/data/kitchen_l.png")
+    ('toy', 'kitchen_l')
+    """
+    from pathlib import Path
+
+    p = Path(str(left))
+    if p.stem.lower() in GENERIC_LEFT and p.parent.name not in ("", ".", "/"):
+        return p.parent.name
+    return p.stem or "stereo_pair"
+
+
 def register() -> None:
     """Register the schemas in Hydra's ConfigStore (idempotent)."""
     from pathlib import Path
@@ -99,6 +116,9 @@ def register() -> None:
     cs.store(name="run_schema", node=RunConfig)
     # ${stem:${data.source}}: a file input's run folder and scene are named after the file
     OmegaConf.register_new_resolver("stem", lambda p: Path(str(p)).stem or "file", replace=True)
+    # ${pair:${data.left}}: a stereo pair's run folder and scene are named after the left file, or
+    # after its folder when the file's name says only "left" (left.png, im0.png, ...)
+    OmegaConf.register_new_resolver("pair", pair_name, replace=True)
 
 
 def log_to_file(log: logging.Logger, level: int, msg: str, *args: object) -> None:

@@ -3,7 +3,8 @@
 The frames are ``sequence.frames`` (a glob of disparity files, sorted by name; any format
 ``read_disparity`` reads) or, when that is empty, a synthetic camera pan over the scene of
 ``data`` (``sequence.width × height`` windows moving ``step_px`` per frame; a masked scene is
-scored frame by frame). Runs :class:`somtorch.video.SequenceRunner` and writes ``metrics.json``
+scored frame by frame). Runs :class:`somtorch.video.SequenceRunner` and writes ``kept.mp4`` (what
+was kept in each frame, at most 640 px wide), ``contact_sheet.png`` (up to 16 frames) and ``metrics.json``
 (schema ``somtorch.video/1``: per frame the kept boxes, the reduction, warm / ground re-used, the
 stage timings; the frames per second; useful hits where scored) into the Hydra run folder.
 
@@ -22,7 +23,9 @@ if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
 import dataclasses
 import glob
 import logging
+import shutil
 import statistics
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -94,7 +97,8 @@ def main(dcfg: DictConfig) -> dict:
     from experiments.cli import interruptible
     from experiments.schema import one_line_errors
     from somtorch import interrupt
-    from somtorch.atomic import write_staged
+    from somtorch.atomic import commit_staged, write_json
+    from somtorch.outputs import SequenceWriter
     from somtorch.video import SequenceRunner
 
     out = Path(HydraConfig.get().runtime.output_dir)
@@ -105,32 +109,51 @@ def main(dcfg: DictConfig) -> dict:
                                 ground_keep=s.ground_keep, ground_every=s.ground_every)
         frames, n = frames_of(cfg)
         rows, t0 = [], time.perf_counter()
-        for i, scene in enumerate(frames):
-            if i == 0:  # every frame has the size of the first: a cold frame, then warm ones
-                from experiments.run import check_resources
-
-                warm = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, epochs=s.warm_epochs))
-                check_resources([(scene, cfg, 1), (scene, warm if s.warm else cfg, n - 1)], cfg.resources,
-                                f"sequence of {n} frames of {scene.width}x{scene.height}")
-            interrupt.checkpoint(f"after frame {i}/{n}")
-            r = runner.step(scene)
-            m = r.members[0]
-            rows.append({"frame": r.index, "warm": r.warm, "ground_reused": r.ground_reused,
-                         "kept_boxes": [list(a.box) for a in m.kept], "reduction_union": m.reduction.reduction_union,
-                         "no_object": m.no_object, "useful_hit": None if m.score is None else m.score.useful_hit,
-                         "timings_ms": {k: 1e3 * v for k, v in r.timings.items()}})
-        wall = time.perf_counter() - t0
-    per = [sum(r["timings_ms"].values()) for r in rows[1:]] or [sum(rows[0]["timings_ms"].values())]
+        out.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out))  # moved in only when complete
+        try:
+            pictures = SequenceWriter(stage, n)
+            summary = _run_frames(cfg, runner, frames, n, rows, pictures)
+            pictures_info = pictures.close()
+            summary["wall_s"] = time.perf_counter() - t0
+            write_json(stage / "metrics.json", {"schema": SCHEMA, "summary": summary, "frames": rows,
+                                                "pictures": pictures_info,
+                                                "config": OmegaConf.to_container(dcfg, resolve=True)})
+            commit_staged(stage, out)
+        finally:
+            shutil.rmtree(stage, ignore_errors=True)
     scored = [r["useful_hit"] for r in rows if r["useful_hit"] is not None]
-    summary = {"frames": len(rows), "median_ms_per_frame": statistics.median(per),
-               "fps": 1e3 / statistics.median(per), "wall_s": wall,
-               "useful_hits": sum(scored) if scored else None, "scored_frames": len(scored)}
-    write_staged(out, {"metrics.json": {"schema": SCHEMA, "summary": summary, "frames": rows,
-                                        "config": OmegaConf.to_container(dcfg, resolve=True)}})
     log.info("%d frames, %.1f ms / frame (%.1f fps, first frame excluded)%s; metrics in %s", len(rows),
              summary["median_ms_per_frame"], summary["fps"],
              f", useful hits {summary['useful_hits']}/{len(scored)}" if scored else "", out / "metrics.json")
+    print(f"outputs in {out}", flush=True)  # always, --quiet too: where the results are
     return summary
+
+
+def _run_frames(cfg: VideoConfig, runner, frames, n: int, rows: list, pictures) -> dict:
+    """Every frame through ``runner`` (a row of ``rows`` each, its picture into ``pictures``); the summary."""
+    from experiments.run import check_resources
+    from somtorch import interrupt
+
+    s = cfg.sequence
+    for i, scene in enumerate(frames):
+        if i == 0:  # every frame has the size of the first: a cold frame, then warm ones
+            warm = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, epochs=s.warm_epochs))
+            check_resources([(scene, cfg, 1), (scene, warm if s.warm else cfg, n - 1)], cfg.resources,
+                            f"sequence of {n} frames of {scene.width}x{scene.height}")
+        interrupt.checkpoint(f"after frame {i}/{n}")
+        r = runner.step(scene)
+        pictures.add(r.index, scene, r.members[0])
+        m = r.members[0]
+        rows.append({"frame": r.index, "warm": r.warm, "ground_reused": r.ground_reused,
+                     "kept_boxes": [list(a.box) for a in m.kept], "reduction_union": m.reduction.reduction_union,
+                     "no_object": m.no_object, "useful_hit": None if m.score is None else m.score.useful_hit,
+                     "timings_ms": {k: 1e3 * v for k, v in r.timings.items()}})
+    per = [sum(r["timings_ms"].values()) for r in rows[1:]] or [sum(rows[0]["timings_ms"].values())]
+    scored = [r["useful_hit"] for r in rows if r["useful_hit"] is not None]
+    return {"frames": len(rows), "median_ms_per_frame": statistics.median(per),
+            "fps": 1e3 / statistics.median(per), "useful_hits": sum(scored) if scored else None,
+            "scored_frames": len(scored)}
 
 
 def cli() -> None:

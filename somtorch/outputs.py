@@ -167,3 +167,59 @@ def write_point_clouds(scene: Scene, result: PipelineResult, out_dir: Path, *, m
                                               "(depth clipped to its 1-99 % range)")
     info["seconds"] = time.perf_counter() - t0
     return info
+
+
+class SequenceWriter:
+    """The pictures of a disparity sequence, written frame by frame (bounded in size whatever the
+    number of frames): ``kept.mp4`` (what the reduction kept, :func:`viz.kept_view`, OpenCV's mp4v
+    codec, at most ``max_width`` px wide, ``fps`` frames per second) and ``contact_sheet.png`` (up to
+    ``sheet`` frames spread evenly over the sequence, ``thumb_width`` px wide each, 4 per row).
+    """
+
+    def __init__(self, out_dir: Path, frames: int, *, fps: float = 10.0, max_width: int = 640, sheet: int = 16,
+                 thumb_width: int = 320) -> None:
+        self.out_dir, self.fps, self.max_width, self.thumb_width = Path(out_dir), fps, max_width, thumb_width
+        self.picks = set(np.linspace(0, max(frames - 1, 0), min(sheet, max(frames, 1))).round().astype(int).tolist())
+        self.thumbs: list[tuple[int, np.ndarray]] = []
+        self._video = None
+        self._size: tuple[int, int] | None = None
+        self.frames = 0
+
+    def add(self, index: int, scene: Scene, member: Any) -> None:
+        """Frame ``index``: ``scene`` and its :class:`~somtorch.pipeline.MemberResult` ``member``."""
+        import cv2
+
+        img = viz.kept_view(scene.disparity, scene.valid, member.reduction.mask, member.reduction.boxes)
+        h, w = img.shape[:2]
+        if self._size is None:
+            f = min(1.0, self.max_width / w)
+            self._size = (max(2, round(w * f) // 2 * 2), max(2, round(h * f) // 2 * 2))  # even sides
+            self._video = cv2.VideoWriter(str(self.out_dir / "kept.mp4"), cv2.VideoWriter_fourcc(*"mp4v"),
+                                          self.fps, self._size)
+        frame = cv2.resize(img, self._size, interpolation=cv2.INTER_AREA)
+        cv2.putText(frame, f"{index}", (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+        self._video.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+        self.frames += 1
+        if index in self.picks:
+            tw = self.thumb_width
+            self.thumbs.append((index, cv2.resize(frame, (tw, max(1, round(frame.shape[0] * tw / frame.shape[1]))),
+                                                  interpolation=cv2.INTER_AREA)))
+
+    def close(self) -> dict[str, Any]:
+        """Finish the video and write the contact sheet; returns what was written."""
+        if self._video is not None:
+            self._video.release()
+            self._video = None
+        if not self.thumbs:
+            return {"frames": 0}
+        cols = min(4, len(self.thumbs))
+        th, tw = self.thumbs[0][1].shape[:2]
+        rows = -(-len(self.thumbs) // cols)
+        sheet = np.zeros((rows * th, cols * tw, 3), np.uint8)
+        for i, (_, t) in enumerate(self.thumbs):
+            r, c = divmod(i, cols)
+            sheet[r * th:r * th + t.shape[0], c * tw:c * tw + t.shape[1]] = t[:th, :tw]
+        viz.save_png(sheet, self.out_dir / "contact_sheet.png")
+        return {"frames": self.frames, "video": "kept.mp4", "video_size": list(self._size or ()),
+                "fps": self.fps, "contact_sheet": "contact_sheet.png",
+                "contact_sheet_frames": [i for i, _ in self.thumbs]}

@@ -121,6 +121,24 @@ def draw_areas(background: np.ndarray, labels: torch.Tensor, kept_neurons: list[
     return out
 
 
+def kept_view(disparity: torch.Tensor, valid: torch.Tensor, kept: torch.Tensor,
+              boxes: list[tuple[int, int, int, int]], *, lo: float | None = None, hi: float | None = None
+              ) -> np.ndarray:
+    """What a reduction kept: the coloured disparity inside the kept boxes, dimmed outside, the
+    boxes in yellow (one frame of a sequence's video).
+
+    Shape:
+        ``disparity`` ``(H, W)`` float, ``valid`` and ``kept`` ``(H, W)`` bool → ``(H, W, 3)`` uint8.
+    """
+    img = colorize(disparity, valid, lo=lo, hi=hi).astype(np.float32)
+    out_side = ~kept.cpu().numpy()
+    img[out_side] *= 0.3
+    out = img.clip(0, 255).astype(np.uint8)
+    for x0, y0, x1, y1 in boxes:
+        cv2.rectangle(out, (x0, y0), (x1, y1), (255, 255, 0), 2)
+    return out
+
+
 def image_or_disparity(image: torch.Tensor | None, disparity: torch.Tensor, valid: torch.Tensor) -> np.ndarray:
     """The left image as ``(H, W, 3)`` uint8, or a grey disparity rendering when there is none."""
     if image is not None:

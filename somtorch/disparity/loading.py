@@ -82,7 +82,8 @@ def load_scene(spec: str | Path, *, disparity_file: str | Path | None = None,
       disparity, e.g. ``"disp_est.png"`` for the KITTI estimate, and ``disparity_scale`` its
       encoding (stored value × scale = px), e.g. ``0.25`` for the 8-bit ``disp2.png`` of the
       Middlebury 2003 scenes (``1/8`` for 2001, ``1`` for the third-size 2005/2006 ``disp1.png``).
-    * a ``.pfm``/``.png``/``.npy``/``.npz`` file: disparity only, no image or camera.
+    * a ``.pfm``/``.png``/``.npy``/``.npz`` file: the disparity, no image; the camera of a
+      calibration file beside it (:data:`CALIBRATION_FILES`: ``calib.txt``, ...) when there is one.
 
     Raises:
         FileNotFoundError: ``spec`` (or ``disparity_file``) does not exist.
@@ -108,8 +109,33 @@ def load_scene(spec: str | Path, *, disparity_file: str | Path | None = None,
         raise ValueError(f"disparity_file applies to folders; {path} is a file")
     disparity, valid = read_disparity(path, scale=disparity_scale)
     _require_some_valid(path, valid)
-    return Scene(name=path.stem, disparity=disparity, valid=valid,
-                 source={"layout": "file", "disparity": str(path)})
+    scene = Scene(name=path.stem, disparity=disparity, valid=valid, source={"layout": "file", "disparity": str(path)})
+    _camera_beside(scene, path)
+    return scene
+
+
+CALIBRATION_FILES = ("calib.txt", "stereodemo_calibration.json", "calib_cam_to_cam.txt")
+"""Calibration files :func:`load_scene` looks for beside a single disparity file (the first found)."""
+
+
+def _camera_beside(scene: Scene, path: Path) -> None:
+    """Give ``scene`` the camera of a calibration file beside its disparity file, if there is one
+    that fits the map (one that does not is named in a warning and ignored)."""
+    import logging
+
+    from .camera import read_calibration
+
+    for name in CALIBRATION_FILES:
+        calib = path.parent / name
+        if calib.is_file():
+            try:
+                scene.camera = read_calibration(calib, (scene.height, scene.width))
+            except (ValueError, OSError) as e:
+                logging.getLogger(__name__).warning("%s beside %s is not used: %s", name, path.name,
+                                                    str(e).splitlines()[0])
+                return
+            scene.source["camera"] = str(calib)
+            return
 
 
 def _load_motorcycle() -> Scene:

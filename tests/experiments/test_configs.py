@@ -98,6 +98,13 @@ def test_data_file_without_a_source_is_missing():
         OmegaConf.to_object(cfg)
 
 
+def test_a_stereo_pair_is_named_after_its_files():
+    named = OmegaConf.to_object(_compose(["data=stereo_pair", "data.left=/d/toy/left.png", "data.right=/d/toy/right.png"]))
+    assert named.data.name == "toy"  # left.png says nothing: the folder's name
+    named = OmegaConf.to_object(_compose(["data=stereo_pair", "data.left=/d/kitchen_l.png", "data.right=/d/kitchen_r.png"]))
+    assert named.data.name == "kitchen_l"
+
+
 def test_stereo_pair_without_a_left_image_is_missing():
     cfg = _compose(["data=stereo_pair", "data.right=r.png"])
     with pytest.raises(MissingMandatoryValue, match="left"):

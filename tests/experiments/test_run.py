@@ -201,6 +201,26 @@ def test_stereo_pair_with_camera_gives_point_clouds(shared_data, tmp_path):
     assert pc["points_full"] == m["scene"]["valid_pixels"]  # SGBM's valid pixels, one point each
     assert 0 < pc["points_reduced"] <= pc["points_full"]
     assert len(read_ply(tmp_path / "cloud_reduced.ply")) == pc["points_reduced"]
+    assert m["scene"]["name"] == "toy"  # the folder holding left.png, not "stereo_pair"
+
+
+def test_a_disparity_file_with_calib_txt_beside_it_gives_point_clouds(shared_data, tmp_path):
+    """data=file: the camera comes from the calib.txt beside the PFM; --quiet still says where."""
+    src = tmp_path / "terrace"
+    src.mkdir()
+    for name in ("disp0.pfm", "calib.txt"):
+        (src / name).write_bytes((shared_data / "eth3d" / "terrace" / name).read_bytes())
+    run_dir = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "experiments.run", "--quiet", f"hydra.run.dir={run_dir}", "data=file",
+                           f"data.source={src / 'disp0.pfm'}", "output.render=false", "output.maps=false",
+                           "output.tensorboard=false", "train.epochs=3"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip().splitlines() == [f"outputs in {run_dir}"]
+    m = json.loads((run_dir / "metrics.json").read_text())
+    assert m["pointcloud"]["written"] and m["pointcloud"]["points_full"] == m["scene"]["valid_pixels"]
+    assert m["scene"]["source"]["camera"] == str(src / "calib.txt")
+    assert (run_dir / "cloud_full.ply").exists()
 
 
 def test_stereo_pair_with_half_a_camera_fails_before_output(shared_data, tmp_path):

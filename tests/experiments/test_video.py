@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -26,6 +27,17 @@ def test_pan_over_the_embedded_scene(tmp_path):
     assert [f["warm"] for f in m["frames"]] == [False, True, True, True, True]
     assert all(f["kept_boxes"] and 0 <= f["reduction_union"] <= 100 for f in m["frames"])
     assert m["summary"]["fps"] > 0 and m["summary"]["useful_hits"] is None  # the embedded map has no mask
+    # what was kept, per frame: a video of 5 frames (320 x 200: smaller than the 640 px bound) and a sheet
+    cap = cv2.VideoCapture(str(tmp_path / "kept.mp4"))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 5
+    ok, frame = cap.read()
+    assert ok and frame.shape == (200, 320, 3) and frame.std() > 10
+    cap.release()
+    sheet = cv2.imread(str(tmp_path / "contact_sheet.png"))
+    assert sheet.shape == (2 * 200, 4 * 320, 3)  # 5 frames, 4 per row
+    assert m["pictures"]["frames"] == 5 and m["pictures"]["contact_sheet_frames"] == [0, 1, 2, 3, 4]
+    assert "outputs in" in proc.stdout and str(tmp_path) in proc.stdout
+    assert not list(tmp_path.glob(".partial-*"))
 
 
 def test_frames_from_files_and_a_bad_glob(tmp_path):
