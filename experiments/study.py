@@ -107,7 +107,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
     from somtorch.atomic import commit_staged, write_json
     from somtorch.disparity.resize import resize_scene
     from somtorch.outputs import train_strides, write_maps
-    from somtorch.pipeline import run_pipeline
+    from somtorch.pipeline import fallback_summary, run_pipeline
 
     chash = config_hash(config)
     if cfg.skip_complete:
@@ -145,30 +145,31 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
         per_rep = 1 if cfg.execution == "ensemble" or cfg.runs == 1 else cfg.runs
         bar = tqdm(total=cfg.repeats * per_rep, desc=f"{scene.name} runs", unit="run", leave=False,
                    disable=not show_progress())  # updated between timed runs only
-        if cfg.repeats > 1:  # timing study: one untimed warm-up (kernel compile/load, allocator, caches)
-            run_pipeline(scene, dataclasses.replace(cfg, ensemble=1), metrics=False)
-        for rep in range(cfg.repeats):
-            t0 = time.perf_counter()
-            if cfg.execution == "ensemble" or cfg.runs == 1:
-                res = [run_pipeline(scene, cfg, metrics=True)]
-                times = None
-                bar.update()
-            else:
-                res, times = [], []
-                for e in range(cfg.runs):
-                    te = time.perf_counter()
-                    solo = dataclasses.replace(cfg, ensemble=1, seed=cfg.seed + e)
-                    res.append(run_pipeline(scene, solo, metrics=True))
-                    times.append(time.perf_counter() - te)
+        with fallback_summary(scene.name):  # one warning line for the job, not one per run
+            if cfg.repeats > 1:  # timing study: one untimed warm-up (kernel compile/load, allocator, caches)
+                run_pipeline(scene, dataclasses.replace(cfg, ensemble=1), metrics=False)
+            for rep in range(cfg.repeats):
+                t0 = time.perf_counter()
+                if cfg.execution == "ensemble" or cfg.runs == 1:
+                    res = [run_pipeline(scene, cfg, metrics=True, progress=show_progress())]  # epochs bar
+                    times = None
                     bar.update()
-            wall = time.perf_counter() - t0
-            stages: dict[str, float] = {}
-            for r in res:
-                for k, v in r.timings.items():
-                    stages[k] = stages.get(k, 0.0) + v
-            repeats.append({**stages, "wall": wall})
-            if rep == 0:
-                results, per_run_s = res, times
+                else:
+                    res, times = [], []
+                    for e in range(cfg.runs):
+                        te = time.perf_counter()
+                        solo = dataclasses.replace(cfg, ensemble=1, seed=cfg.seed + e)
+                        res.append(run_pipeline(scene, solo, metrics=True))
+                        times.append(time.perf_counter() - te)
+                        bar.update()
+                wall = time.perf_counter() - t0
+                stages: dict[str, float] = {}
+                for r in res:
+                    for k, v in r.timings.items():
+                        stages[k] = stages.get(k, 0.0) + v
+                repeats.append({**stages, "wall": wall})
+                if rep == 0:
+                    results, per_run_s = res, times
         bar.close()
         runs = merge_runs([run_records(scene, r, obj_mask, None if per_run_s is None else per_run_s[i:i + 1])
                             for i, r in enumerate(results)])

@@ -15,6 +15,7 @@ import logging
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -196,15 +197,47 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
         score = score_reduction(red, obj_mask, scene.valid, x_opt=x_opt) if obj_mask is not None else None
         members.append(MemberResult(seg.seeds[e], found.areas, found.kept, red, score, found.stats,
                                     found.no_object))
+    _warn_fallbacks(scene.name, members)
+    return members
+
+
+_summary: ContextVar[list[int] | None] = ContextVar("fallback_summary", default=None)
+
+
+def _warn_fallbacks(name: str, members: list[MemberResult]) -> None:
+    """One warning line for the members that kept (nearly) everything, one for those that found no
+    object; inside :func:`fallback_summary` only counted, for its one line at the end."""
     everything = [i for i, m in enumerate(members) if not m.no_object and m.reduction.reduction_union < 1.0]
+    fallback = sum(m.no_object for m in members)
+    counts = _summary.get()
+    if counts is not None:
+        counts[0] += len(everything)
+        counts[1] += fallback
+        counts[2] += len(members)
+        return
     if everything:
         log.warning("scene %s: member(s) %s keep %s of the valid pixels (reduction < 1 %%): the kept areas cover "
-                    "the whole map", scene.name, everything[:5], "all or nearly all")
-    fallback = sum(m.no_object for m in members)
+                    "the whole map", name, everything[:5], "all or nearly all")
     if fallback:
         log.warning("scene %s: %d of %d member(s) found no convincing object area; the whole map is kept "
-                    "(flagged no_object)", scene.name, fallback, len(members))
-    return members
+                    "(flagged no_object)", name, fallback, len(members))
+
+
+@contextmanager
+def fallback_summary(name: str) -> Iterator[list[int]]:
+    """Many pipeline calls on one scene (the separate runs of a study job) warn once, at the end:
+    ``scene S: of N runs, A kept (nearly) all valid pixels, B found no object (whole map kept)``.
+    Yields ``[kept all, no object, runs]``."""
+    counts = [0, 0, 0]
+    token = _summary.set(counts)
+    try:
+        yield counts
+    finally:
+        _summary.reset(token)
+    if counts[0] or counts[1]:
+        log.warning("scene %s: of %d runs, %d kept all or nearly all of the valid pixels (reduction < 1 %%), %d found "
+                    "no convincing object area (whole map kept, flagged no_object)", name, counts[2], counts[0],
+                    counts[1])
 
 
 def train_stride(scene: Scene, cfg: PipelineConfig) -> int:

@@ -146,7 +146,8 @@ def render_point_cloud(cloud: PointCloud, path: str | os.PathLike[str], *, width
                                "use (Open3D 0.20 on Debian/Ubuntu: "
                                "apt-get install -y libvulkan1 mesa-vulkan-drivers).")
         else:
-            log.info("Open3D offscreen rendering unavailable (%s); using matplotlib", reason)
+            # expected on a headless machine (and decided once per process): not worth a line per run
+            log.debug("Open3D offscreen rendering unavailable (%s); using matplotlib", reason)
     if depth_percentiles is not None:
         z = cloud.points[:, 2].detach().cpu().double()
         lo_q, hi_q = (float(q) for q in torch.quantile(z, torch.tensor(depth_percentiles, dtype=torch.float64) / 100))
