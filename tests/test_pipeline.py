@@ -331,3 +331,35 @@ def test_the_tree_preset_runs_the_pipeline_and_keeps_the_motorcycle(motorcycle):
     assert tree_run.members[0].reduction.reduction_union > 10.0
     x0, y0, x1, y1 = tree_run.members[0].kept[0].box
     assert x1 - x0 > motorcycle.width // 3 and y1 - y0 > motorcycle.height // 3
+
+
+def test_many_calls_warn_once_about_kept_everything(caplog):
+    """The paper preset keeps the whole map in many runs: inside fallback_summary (a study job's
+    separate runs) one line for all of them instead of one per run."""
+    import logging
+
+    from somtorch.config import with_overrides
+    from somtorch.disparity.scene import load_scene
+    from somtorch.pipeline import PipelineConfig, fallback_summary, run_pipeline
+
+    from pathlib import Path
+
+    import yaml
+
+    scene = load_scene("motorcycle")
+    conf = Path(__file__).resolve().parents[1] / "conf"
+    paper = {f"{g}.{k}": v for g, name in (("objects", "paper"), ("reduction", "paper"), ("ground", "none"),
+                                           ("features", "paper_or"), ("train", "online"), ("som", "grid4x7"))
+             for k, v in (yaml.safe_load((conf / g / f"{name}.yaml").read_text()) or {}).items()}
+    cfg = with_overrides(PipelineConfig(), {**paper, "train.epochs": 2})  # the paper preset, shorter
+    with caplog.at_level(logging.WARNING, logger="somtorch.pipeline"):
+        plain = [run_pipeline(scene, with_overrides(cfg, {"seed": s}), metrics=False) for s in range(4)]
+        per_call = len(caplog.records)
+        caplog.clear()
+        with fallback_summary(scene.name) as counts:
+            for s in range(4):
+                run_pipeline(scene, with_overrides(cfg, {"seed": s}), metrics=False)
+    flagged = sum(m.no_object or m.reduction.reduction_union < 1.0 for r in plain for m in r.members)
+    assert flagged >= 2 and per_call == flagged  # the setting does trigger the warning, run after run
+    assert len(caplog.records) == 1 and "of 4 runs" in caplog.records[0].getMessage()
+    assert counts[2] == 4 and counts[0] + counts[1] == flagged

@@ -113,3 +113,12 @@ def test_values_of_the_wrong_type_are_named(args, expect):
 def test_values_of_the_right_type_pass():
     assert check_overrides(["train.sigma=null", "train.sigma=2", "objects.similarity=1", "object_id=null",
                             "objects.drop_specks=false", "train.epochs=range(1,4)"], RunConfig) is None
+
+
+def test_the_suite_runs_without_plugin_warnings():
+    """pytest's own output is clean: dash's testing plugin (installed with open3d) registers an
+    old-style hook that warned on every run; pyproject.toml disables it (-p no:dash)."""
+    proc = subprocess.run([sys.executable, "-m", "pytest", "--co", "-q", "-p", "no:cacheprovider",
+                           "tests/test_atomic.py"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout[-2000:]
+    assert "warnings summary" not in proc.stdout and "PytestRemovedIn" not in proc.stdout + proc.stderr

@@ -132,8 +132,17 @@ def test_bad_study_configs_fail_before_any_work(override, message):
 @pytest.fixture(scope="module")
 def basic_sweep(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("basic")
-    _study(out, *SWEEP)
+    proc = _study(out, *SWEEP)
+    (out / "stderr.txt").write_text(proc.stderr)
     return out / "studies" / "ci"
+
+
+def test_a_sweep_says_its_job_count_and_time_first(basic_sweep):
+    err = (basic_sweep.parents[1] / "stderr.txt").read_text().splitlines()
+    first = err[0]
+    assert first.startswith("study ci: 4 jobs, estimated ~") and "from the sizes of 4 job(s)" in first, err[:3]
+    assert "largest peak memory ~" in first
+    assert not any("Traceback" in line for line in err)
 
 
 def test_basic_sweep_writes_one_folder_per_job_and_aggregates(basic_sweep, tmp_path):
