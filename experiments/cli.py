@@ -126,6 +126,19 @@ def check_overrides(argv: list[str], schema: type) -> str | None:
 
 
 @contextlib.contextmanager
+def marked_if_failed(out_dir: Path) -> Iterator[None]:
+    """A job that exits with an error leaves ``FAILED`` in the folder Hydra made for it (beside
+    ``run.log`` and ``.hydra``), so that nobody, and no aggregate, takes the folder for a result."""
+    try:
+        yield
+    except SystemExit as e:
+        if e.code and out_dir.is_dir() and not (out_dir / "FAILED").exists() and not (
+                out_dir / "metrics.json").exists():
+            (out_dir / "FAILED").write_text(f"this run failed (exit status {e.code}); the error is in the log\n")
+        raise
+
+
+@contextlib.contextmanager
 def interruptible(out_dir: Path | None) -> Iterator[None]:
     """SIGINT / SIGTERM stop the job between epochs, chunks and members (:mod:`somtorch.interrupt`):
     one line on stderr, ``FAILED`` in ``out_dir`` (staging folders and the lock are removed by the

@@ -231,7 +231,7 @@ def main(dcfg: DictConfig) -> dict:
     from experiments.cli import configure_threads
 
     configure_threads()
-    from experiments.cli import interruptible, quiet
+    from experiments.cli import interruptible, marked_if_failed, quiet
     from experiments.schema import one_line_errors
     from somtorch.atomic import exclusive_folder
 
@@ -241,18 +241,12 @@ def main(dcfg: DictConfig) -> dict:
         for h in logging.getLogger().handlers:
             if isinstance(h, logging.StreamHandler) and not isinstance(h, logging.FileHandler):
                 h.setLevel(logging.WARNING)
-    try:
-        with interruptible(out_dir), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
-            cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
-            out_dir.mkdir(parents=True, exist_ok=True)
-            with exclusive_folder(out_dir):  # two runs never write into one folder
-                return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
-    except SystemExit as e:
-        if e.code and out_dir.is_dir() and not (out_dir / "metrics.json").exists() and not (out_dir / "FAILED").exists():
-            # the folder Hydra created holds only its config and the log: mark it, so that nobody
-            # (and no aggregate) takes it for a run
-            (out_dir / "FAILED").write_text(f"this run failed (exit status {e.code}); the error is in run.log\n")
-        raise
+    # an error or a refusal: one line, FAILED; Ctrl-C / kill: one line, FAILED, 130 / 143
+    with marked_if_failed(out_dir), interruptible(out_dir), one_line_errors(log):
+        cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with exclusive_folder(out_dir):  # two runs never write into one folder
+            return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
 
 
 def cli() -> None:

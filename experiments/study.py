@@ -208,6 +208,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
         metrics["wall_s"] = time.perf_counter() - t_start
         write_json(stage / "metrics.json", metrics)
         commit_staged(stage, out_dir)  # metrics.json last: its presence marks a complete job
+        (out_dir / "FAILED").unlink(missing_ok=True)  # left by an earlier, failed or interrupted attempt
     finally:
         shutil.rmtree(stage, ignore_errors=True)
     s = metrics["summary"]
@@ -265,12 +266,12 @@ def _write_tensorboard(writer, cfg: StudyConfig, metrics: dict[str, Any]) -> Non
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="study")
 def main(dcfg: DictConfig) -> float:
     """Hydra entry point; returns the job's objective (``summary.tradeoff``; 0 without an object mask)."""
-    from experiments.cli import configure_threads, interruptible
+    from experiments.cli import configure_threads, interruptible, marked_if_failed
     from experiments.schema import one_line_errors
 
     configure_threads()
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    with interruptible(out_dir), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED in the job's folder
+    with marked_if_failed(out_dir), interruptible(out_dir), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED in the job's folder
         cfg: StudyConfig = OmegaConf.to_object(dcfg)
         metrics = execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
     return float(metrics["summary"].get("tradeoff", 0.0))

@@ -340,14 +340,14 @@ ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="validate")
 def main(dcfg: DictConfig) -> int:
-    from experiments.cli import configure_threads, interruptible
+    from experiments.cli import configure_threads, interruptible, marked_if_failed
 
     configure_threads()
     from experiments.schema import one_line_errors
     from somtorch.atomic import write_staged
 
     out = Path(HydraConfig.get().runtime.output_dir)
-    with interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
+    with marked_if_failed(out), interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
         cfg: ValidateConfig = OmegaConf.to_object(dcfg)
         report = evaluate(cfg)
     write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": report})

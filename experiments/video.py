@@ -94,7 +94,7 @@ def main(dcfg: DictConfig) -> dict:
     from experiments.cli import configure_threads
 
     configure_threads()
-    from experiments.cli import interruptible
+    from experiments.cli import interruptible, marked_if_failed
     from experiments.schema import one_line_errors
     from somtorch import interrupt
     from somtorch.atomic import commit_staged, write_json
@@ -102,7 +102,7 @@ def main(dcfg: DictConfig) -> dict:
     from somtorch.video import SequenceRunner
 
     out = Path(HydraConfig.get().runtime.output_dir)
-    with interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
+    with marked_if_failed(out), interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
         cfg: VideoConfig = OmegaConf.to_object(dcfg)
         s = cfg.sequence
         runner = SequenceRunner(cfg, warm=s.warm, warm_epochs=s.warm_epochs, warm_sigma=s.warm_sigma,
