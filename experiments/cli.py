@@ -151,6 +151,7 @@ def interruptible(out_dir: Path | None) -> Iterator[None]:
     interrupt.install()
     try:
         yield
+        interrupt.note("")  # a signal between the jobs of a multirun is not "after epoch 9/10"
     except interrupt.Interrupted as e:
         where = f" {e.where}" if e.where else ""
         tail = "partial results not written"
