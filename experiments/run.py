@@ -82,10 +82,11 @@ def load_input(cfg: RunConfig):
     return scene
 
 
-def check_resources(jobs: list, resources, what: str) -> None:
+def check_resources(jobs, resources, what: str) -> None:
     """Refuse (:class:`somtorch.resources.ResourceError`, one line) work that would need more memory or
     time than ``resources`` (a :class:`~somtorch.config.ResourcesConfig`) allows. ``jobs``: ``(scene,
-    pipeline config, times)`` run one after another (peak: the largest; time: the sum)."""
+    pipeline config, times)`` run one after another (peak: the largest; time: the sum); an iterable,
+    so that a long list of frames is read one at a time."""
     from somtorch.pipeline import resource_estimate
     from somtorch.resources import check, combine
 
