@@ -174,8 +174,7 @@ def summary_figure(scene, result, path: str | os.PathLike, member: int = 0) -> P
     ground = result.ground.mask.numpy() if result.ground is not None else None
     h, w = d.shape
     fig, axes = plt.subplots(2, 3, figsize=(15, 10 * h / w + 1.6), dpi=80, constrained_layout=True)
-    cmap = matplotlib.colormaps["turbo"].copy()
-    cmap.set_bad((0.55, 0.55, 0.55))
+    cmap = matplotlib.colormaps["turbo"].with_extremes(bad=(0.55, 0.55, 0.55))
 
     def disparity_panel(ax, values, title):
         im = ax.imshow(values, cmap=cmap, vmin=lo, vmax=hi, interpolation="nearest")

@@ -325,10 +325,10 @@ def test_a_file_input_names_its_folder_and_scene(tmp_path):
     assert all(isinstance(x["kept_everything"], bool) for x in m["members"])
 
 
-def test_quiet_prints_nothing_and_keeps_the_log(tmp_path):
+def test_quiet_prints_only_where_the_results_are_and_keeps_the_log(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "experiments.run", "--quiet", f"hydra.run.dir={tmp_path / 'run'}",
                            "output.pointcloud=false", "output.maps=false"], cwd=ROOT, capture_output=True, text=True,
                           timeout=300, env={**os.environ, "MPLBACKEND": "Agg"})
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert proc.stdout == "" and proc.stderr == ""
+    assert proc.stdout == f"outputs in {tmp_path / 'run'}\n" and proc.stderr == ""
     assert "outputs in" in (tmp_path / "run" / "run.log").read_text()
