@@ -28,7 +28,7 @@ from somtorch.synth.families import FAMILIES
 from somtorch.synth.render import cast, shade
 from somtorch.validation import check_choice
 
-__all__ = ["Frame", "draw_layout", "generate_frame", "min_pixels", "render_layout"]
+__all__ = ["Frame", "RenderedPair", "draw_layout", "generate_frame", "min_pixels", "render_layout"]
 
 _MAX_SUBSEEDS = 50
 _NOISE_SIGMA = 1.5  # grey levels of the mild Gaussian image noise
@@ -86,17 +86,38 @@ def draw_layout(family: str, seed: int, camera: SynthCamera, sub: int = 0) -> tu
     return layout.scaled(s), rng
 
 
-def render_layout(layout: Layout, camera: Camera, width: int, height: int
-                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Left/right colour ``(H, W, 3)`` float in [0, 1], left/right depth ``(H, W)`` and the left primitive map."""
+@dataclass(eq=False)
+class RenderedPair:
+    """Both views of a layout before quantisation.
+
+    Attributes:
+        rgb_left, rgb_right: float32 colour in [0, 1], ``(H, W, 3)``.
+        disp_left, disp_right: GT disparity ``f·B/Z`` of each view, ``inf`` where nothing is hit.
+        depth_left: depth Z of the left view, metres (``inf`` = nothing hit).
+        prim_left, prim_right: index of the primitive seen at each pixel (-1 = nothing).
+    """
+
+    rgb_left: torch.Tensor
+    rgb_right: torch.Tensor
+    disp_left: torch.Tensor
+    disp_right: torch.Tensor
+    depth_left: torch.Tensor
+    prim_left: torch.Tensor
+    prim_right: torch.Tensor
+
+
+def render_layout(layout: Layout, camera: Camera, width: int, height: int) -> RenderedPair:
+    """Ray-cast and shade both views of ``layout`` (the right camera ``camera.baseline_m`` to the right)."""
     f, cx, cy = camera.focal_px, camera.cx, camera.cy
     light = torch.tensor(layout.light, dtype=torch.float32)
-    views = []
+    fb = f * camera.baseline_m
+    out = []
     for offset in (0.0, camera.baseline_m):
         hits = cast(layout.prims, layout.pose, f, cx, cy, width, height, offset)
-        views.append((shade(layout.prims, hits, f, light), hits))
-    (rgb_l, hl), (rgb_r, hr) = views
-    return rgb_l, rgb_r, hl.depth, hr.depth, hl.prim
+        disp = torch.where(torch.isfinite(hits.depth), fb / hits.depth, torch.full_like(hits.depth, math.inf))
+        out.append((shade(layout.prims, hits, f, light), disp, hits))
+    (rgb_l, disp_l, hl), (rgb_r, disp_r, hr) = out
+    return RenderedPair(rgb_l, rgb_r, disp_l, disp_r, hl.depth, hl.prim, hr.prim)
 
 
 def _labels(layout: Layout, prim_map: torch.Tensor, depth: torch.Tensor, min_px: int
@@ -151,23 +172,19 @@ def generate_frame(family: str, seed: int, camera: str = "oakd", *, scale: float
     min_px = min_pixels(width, height)
     for sub in range(_MAX_SUBSEEDS):
         layout, rng = draw_layout(family, seed, cam, sub)
-        rgb_l, rgb_r, depth_l, depth_r, prim = render_layout(layout, camera_obj, width, height)
-        fb = camera_obj.focal_px * camera_obj.baseline_m
-        disp_l, disp_r = fb / depth_l, fb / depth_r
-        disp_l = torch.where(torch.isfinite(depth_l), disp_l, torch.full_like(disp_l, math.inf))
-        disp_r = torch.where(torch.isfinite(depth_r), disp_r, torch.full_like(disp_r, math.inf))
-        finite = disp_l[torch.isfinite(disp_l)]
+        pair = render_layout(layout, camera_obj, width, height)
+        finite = pair.disp_left[torch.isfinite(pair.disp_left)]
         max_d = float(finite.max()) if finite.numel() else 0.0
         ndisp = 16 * math.ceil((math.floor(max_d) + 1) / 16)
         if ndisp > max_ndisp:
             continue
-        objects, info = _labels(layout, prim, depth_l, min_px)
+        objects, info = _labels(layout, pair.prim_left, pair.depth_left, min_px)
         if not info:
             continue
         break
     else:
         raise RuntimeError(f"{family}/{camera}/seed {seed}: no acceptable draw in {_MAX_SUBSEEDS} sub-seeds")
-    left, right = _to_uint8(rgb_l, rng), _to_uint8(rgb_r, rng)
+    left, right = _to_uint8(pair.rgb_left, rng), _to_uint8(pair.rgb_right, rng)
     sgbm_map = None
     if sgbm:
         d, valid = compute_disparity(left, right, SGBMParams(numDisparities=ndisp))
@@ -176,6 +193,6 @@ def generate_frame(family: str, seed: int, camera: str = "oakd", *, scale: float
     meta = {"family": family, "camera": camera, "seed": seed, "sub_seed": sub, "pitch_deg": round(pose.pitch_deg, 3),
             "yaw_deg": round(pose.yaw_deg, 3), "height_m": round(pose.height_m, 4), "scale": round(layout.scale, 4),
             "width": width, "height": height, "ndisp": ndisp, "min_pixels": min_px,
-            "sky_fraction": round(float((~torch.isfinite(depth_l)).float().mean()), 4)}
-    return Frame(left=left, right=right, disparity=disp_l.float(), disparity_right=disp_r.float(), sgbm=sgbm_map,
+            "sky_fraction": round(float((~torch.isfinite(pair.depth_left)).float().mean()), 4)}
+    return Frame(left=left, right=right, disparity=pair.disp_left, disparity_right=pair.disp_right, sgbm=sgbm_map,
                  objects=objects, object_info=info, camera=camera_obj, ndisp=ndisp, meta=meta)

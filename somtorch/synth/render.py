@@ -68,10 +68,9 @@ def pixel_rays(pose: Pose, focal_px: float, cx: float, cy: float, width: int, he
     return origin, dirs
 
 
-def _screen_rect(prim: Primitive, pose: Pose, origin: np.ndarray, focal_px: float, cx: float, cy: float,
+def _screen_rect(prim: Primitive, rot: np.ndarray, origin: np.ndarray, focal_px: float, cx: float, cy: float,
                  width: int, height: int) -> tuple[int, int, int, int] | None:
     """Pixel rectangle ``(y0, y1, x0, x1)`` holding the primitive's projection; None if off screen."""
-    rot = pose.rotation()
     pc = (prim.corners() - origin) @ rot  # (8, 3) camera frame
     z = pc[:, 2]
     if (z <= 1e-6).all():
@@ -97,9 +96,9 @@ def cast(prims: list[Primitive], pose: Pose, focal_px: float, cx: float, cy: flo
     origin, dirs = pixel_rays(pose, focal_px, cx, cy, width, height, offset_m)
     depth = torch.full((height, width), _MISS, dtype=DTYPE)
     index = torch.full((height, width), -1, dtype=torch.int64)
-    o_np = origin.double().numpy()
+    o_np, rot = origin.double().numpy(), pose.rotation()
     for k, prim in enumerate(prims):
-        rect = _screen_rect(prim, pose, o_np, focal_px, cx, cy, width, height)
+        rect = _screen_rect(prim, rot, o_np, focal_px, cx, cy, width, height)
         if rect is None:
             continue
         y0, y1, x0, x1 = rect

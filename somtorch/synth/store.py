@@ -79,9 +79,9 @@ def _png(image: np.ndarray) -> bytes:
 
 def _calib(frame: Frame) -> str:
     c = frame.camera
-    k = f"[{c.focal_px:.6g} 0 {c.cx:.6g}; 0 {c.focal_px:.6g} {c.cy:.6g}; 0 0 1]"
+    k = f"[{c.focal_px!r} 0 {c.cx!r}; 0 {c.focal_px!r} {c.cy!r}; 0 0 1]"
     h, w = frame.disparity.shape
-    return (f"cam0={k}\ncam1={k}\ndoffs=0\nbaseline={c.baseline:.6g}\nwidth={w}\nheight={h}\n"
+    return (f"cam0={k}\ncam1={k}\ndoffs=0\nbaseline={c.baseline!r}\nwidth={w}\nheight={h}\n"
             f"ndisp={frame.ndisp}\n")
 
 
