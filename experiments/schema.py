@@ -68,6 +68,11 @@ class DataConfig:
     calibration: Optional[str] = None
     # the official KITTI 2015 layout: source = the training folder, frame = its number
     frame: Optional[str] = None
+    # a generated frame (conf/data/synthetic.yaml, somtorch.synth): family, camera, seed, version gt|sgbm
+    family: Optional[str] = None
+    camera: Optional[str] = None
+    seed: Optional[int] = None
+    version: Optional[str] = None
 
 
 @dataclass
@@ -87,6 +92,30 @@ class RunConfig(PipelineConfig):
     label: str = "robust"  # a name for the configuration (set by presets; shown in tables)
 
 
+@dataclass
+class SynthConfig:
+    """``python -m experiments.synth``: generated frames written into the cache.
+
+    Attributes:
+        families: families to generate (``somtorch.synth.FAMILIES``).
+        cameras: cameras to generate for (``somtorch.synth.CAMERAS``).
+        n: frames per family x camera (seeds ``start`` to ``start + n - 1``).
+        start: first seed.
+        scale: image size factor (1 = each camera's full size).
+        workers: processes, one frame per task (each on one thread).
+        cache: root of the cache; null = ``$SOMTORCH_CACHE/corpus`` or ``~/.cache/somtorch/corpus``.
+    """
+
+    families: list[str] = field(default_factory=lambda: ["stairs", "garden", "road", "room", "tabletop", "hands",
+                                                         "fence", "clutter"])
+    cameras: list[str] = field(default_factory=lambda: ["oakd"])
+    n: int = 10
+    start: int = 0
+    scale: float = 1.0
+    workers: int = 2
+    cache: Optional[str] = None
+
+
 def register() -> None:
     """Register the schemas in Hydra's ConfigStore (idempotent)."""
     from pathlib import Path
@@ -95,6 +124,7 @@ def register() -> None:
 
     cs = ConfigStore.instance()
     cs.store(name="run_schema", node=RunConfig)
+    cs.store(name="synth_schema", node=SynthConfig)
     # ${stem:${data.source}}: a file input's run folder and scene are named after the file
     OmegaConf.register_new_resolver("stem", lambda p: Path(str(p)).stem or "file", replace=True)
 
