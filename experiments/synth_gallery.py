@@ -31,10 +31,10 @@ def plot_frames(frames: list, path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = len(frames)
-    aspect = frames[0].left.shape[1] / frames[0].left.shape[2]
+    ratios = [fr.left.shape[1] / fr.left.shape[2] for fr in frames]  # H / W of each row
     fig_w = 16.0
-    fig, axes = plt.subplots(rows, 4, figsize=(fig_w, rows * fig_w / 4 * aspect * 1.25 + 0.3), squeeze=False)
+    fig, axes = plt.subplots(len(frames), 4, figsize=(fig_w, sum(fig_w / 4 * r + 0.3 for r in ratios)),
+                             squeeze=False, gridspec_kw={"height_ratios": ratios})
     for row, fr in zip(axes, frames):
         m = fr.meta
         gt = fr.disparity.numpy()

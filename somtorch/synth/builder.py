@@ -160,6 +160,10 @@ class Builder:
         self.rect((0.0, 0.0, z), (_HUGE, 0.0, 0.0), (0.0, _HUGE, 0.0), 0, mat)
 
     # ------------------------------------------------------------------------------------- layout
+    def narrowness(self) -> float:
+        """How much narrower the camera's view is than the OAK-D's (min(W, H) / f relative to 480/451)."""
+        return (min(self.camera.width, self.camera.height) / self.camera.focal_px) / (480 / 451)
+
     def visible_half_width(self, depth: float) -> float:
         """Half the ground width the camera sees at ``depth`` (horizontal view), metres."""
         return depth * self.camera.width / (2 * self.camera.focal_px)

@@ -76,9 +76,8 @@ def stairs(b: Builder, seed: int) -> Pose:
     extra = r.uniform()
     if extra < 0.35:  # something on a step
         i = int(r.integers(0, n))
-        ly = i * run + run / 2
-        parts.small_object(b, x0 - s * ly + c * r.uniform(-width / 3, width / 3), y0 + c * ly,
-                           (i + 1) * rise, r.uniform(0.2, 0.4), yaw)
+        ly, lx = i * run + run / 2, r.uniform(-width / 3, width / 3)
+        parts.small_object(b, x0 + c * lx - s * ly, y0 + s * lx + c * ly, (i + 1) * rise, r.uniform(0.15, 0.25), yaw)
     elif extra < 0.7:  # beside it
         side = r.choice([-1, 1])
         px, py = x0 + side * (width / 2 + r.uniform(0.5, 1.2)), y0 + r.uniform(-1.0, 1.0)
@@ -186,7 +185,7 @@ def clutter(b: Builder, seed: int) -> Pose:
 def room(b: Builder, seed: int) -> Pose:
     r = b.rng
     b.ground(b.material(r.choice(["wood", "ground"]), stripes=0.2))
-    dist = r.uniform(2.2, 4.5)
+    dist = r.uniform(2.2, 4.5) / b.narrowness()  # the same floor area in view for every camera
     fx, fy = 0.0, 4.0
     pose = _looking_at(b, seed, fx, fy, 0.0, dist, min_h=r.uniform(0.5, 1.6))
     reach = dist * min(b.camera.width, b.camera.height) / (2 * b.camera.focal_px)
@@ -195,7 +194,8 @@ def room(b: Builder, seed: int) -> Pose:
     side = r.choice([-1, 1])
     b.wall(fx + side * r.uniform(2.0, 3.5), fy, math.pi / 2 + math.radians(r.uniform(-25, 25)), 14.0, 2.7,
            b.material("wall"))
-    b.ground(b.material("wall", texture="low"), z=2.7)  # ceiling
+    if pose.height_m < 2.4:  # a ceiling, unless the camera looks down from above the walls (a drone)
+        b.ground(b.material("wall", texture="low"), z=2.7)
     makers = [lambda x, y, a: parts.table(b, x, y, (r.uniform(0.8, 1.6), r.uniform(0.6, 1.0)), r.uniform(0.7, 0.78), a),
               lambda x, y, a: parts.chair(b, x, y, a),
               lambda x, y, a: parts.person(b, x, y, a),
@@ -233,8 +233,9 @@ def tabletop(b: Builder, seed: int) -> Pose:
     front = min(pose.y + 0.05, fy - reach)
     size = (max(1.4, 3 * reach), fy + max(0.6, 1.5 * reach) - front)
     parts.table(b, fx, front + size[1] / 2, size, top, support=True)
+    b.wall(fx, front + size[1] + r.uniform(0.3, 2.0), r.uniform(-0.4, 0.4), 30.0, 6.0, b.material("wall"))
     n = int(r.integers(3, 8))
-    sizes = list(dist * r.uniform(0.08, 0.25, n))
+    sizes = list(dist * b.narrowness() * r.uniform(0.08, 0.25, n))  # ~1-10 % of the image each
     for (x, y), s in zip(b.scatter(n, [s * 0.6 for s in sizes], (fx - reach, fx + reach),
                                    (fy - reach * 0.8, fy + reach * 0.8)), sizes):
         parts.small_object(b, x, y, top, s, r.uniform(-math.pi, math.pi))
@@ -247,6 +248,7 @@ def hands(b: Builder, seed: int) -> Pose:
     desk = r.uniform(0.7, 0.78)
     pose = Pose(0.0, 0.0, desk + r.uniform(0.3, 0.5), r.uniform(15, 45), r.uniform(-5, 5))
     b.box_on(0.0, 0.6, desk - 0.04, (2.0, 1.4, 0.04), 0, b.material("wood", stripes=0.1))
+    b.wall(0.0, r.uniform(1.4, 2.5), r.uniform(-0.4, 0.4), 20.0, 5.0, b.material("wall"))
     for _ in range(int(r.integers(1, 3)) if r.uniform() < 0.4 else 1):
         _arm(b, r.uniform(-0.2, 0.2), desk)
     for x, y in b.scatter(int(r.integers(0, 3)), [0.06] * 2, (-0.35, 0.35), (0.55, 0.9)):

@@ -161,7 +161,7 @@ def shade(prims: list[Primitive], hits: Hits, focal_px: float, light: torch.Tens
     w = elev.clamp(0, 1)[..., None]
     unit = (dirs / dirs.norm(dim=-1, keepdim=True)).reshape(-1, 3)
     clouds = texture_value(_SKY, unit, torch.zeros_like(unit[:, 0])).reshape(elev.shape)  # at infinity: d = 0
-    out = (sky_lo * (1 - w) + sky_hi * w) * (1 + 0.12 * clouds)[..., None]  # (H, W, 3)
+    out = (sky_lo * (1 - w) + sky_hi * w) * (1 + 0.06 * clouds)[..., None]  # (H, W, 3)
     flat_idx = hits.prim.reshape(-1)
     flat_out = out.reshape(-1, 3)
     flat_dirs = dirs.reshape(-1, 3)
