@@ -142,7 +142,6 @@ def texture_value(material: Material, points: torch.Tensor, footprint_m: torch.T
     return (wave.mul_(damp)).sum(-1) / math.sqrt(omega.shape[0] / 2)
 
 
-_SKY = Material(rgb=(1.0, 1.0, 1.0), texture="noise", scale_m=0.6, seed=7)  # "metres" = radians here
 _CONTRAST = {"noise": 0.45, "none": 0.0, "stripes": 0.55, "low": 0.45 / 8}
 
 
@@ -160,8 +159,9 @@ def shade(prims: list[Primitive], hits: Hits, focal_px: float, light: torch.Tens
     sky_lo, sky_hi = torch.tensor([0.78, 0.84, 0.9], dtype=DTYPE), torch.tensor([0.5, 0.66, 0.88], dtype=DTYPE)
     w = elev.clamp(0, 1)[..., None]
     unit = (dirs / dirs.norm(dim=-1, keepdim=True)).reshape(-1, 3)
-    clouds = texture_value(_SKY, unit, torch.zeros_like(unit[:, 0])).reshape(elev.shape)  # at infinity: d = 0
-    out = (sky_lo * (1 - w) + sky_hi * w) * (1 + 0.06 * clouds)[..., None]  # (H, W, 3)
+    sky = Material(rgb=(1.0, 1.0, 1.0), texture="noise", scale_m=40 / focal_px, seed=7)  # "metres" = radians
+    clouds = texture_value(sky, unit, torch.zeros_like(unit[:, 0])).reshape(elev.shape)  # at infinity: d = 0
+    out = (sky_lo * (1 - w) + sky_hi * w) * (1 + 0.12 * clouds)[..., None]  # (H, W, 3)
     flat_idx = hits.prim.reshape(-1)
     flat_out = out.reshape(-1, 3)
     flat_dirs = dirs.reshape(-1, 3)
