@@ -124,6 +124,10 @@ class Builder:
         """Box standing on height ``z0``."""
         self.box((x, y, z0 + size[2] / 2), size, obj, mat, yaw)
 
+    def oriented_box(self, centre, axes, obj: int, mat: Material) -> None:
+        """Box ``centre ± axes[:, 0] ± axes[:, 1] ± axes[:, 2]`` (columns: half-extent vectors, any orientation)."""
+        self._add("box", np.asarray(centre, float), np.asarray(axes, float), obj, mat)
+
     def rod(self, p0, p1, radius: float, obj: int, mat: Material) -> None:
         """Cylinder of ``radius`` from ``p0`` to ``p1`` (any orientation)."""
         p0, p1 = np.asarray(p0, float), np.asarray(p1, float)

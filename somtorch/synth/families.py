@@ -13,6 +13,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
 from somtorch.synth import parts
 from somtorch.synth.builder import Builder
 from somtorch.synth.cameras import Pose
@@ -258,8 +260,6 @@ def hands(b: Builder, seed: int) -> Pose:
 
 def _arm(b: Builder, x: float, desk: float) -> int:
     """A forearm reaching towards the camera with an open hand (palm + four fingers + thumb)."""
-    import numpy as np
-
     r = b.rng
     o = b.new_object("hand")
     skin, sleeve = b.material("skin", texture="noise"), b.material("object")
@@ -270,7 +270,7 @@ def _arm(b: Builder, x: float, desk: float) -> int:
     side = np.cross(fwd, [0.0, 0.0, 1.0])
     side /= np.linalg.norm(side)
     palm_c = wrist + fwd * 0.05
-    b._add("box", palm_c, np.stack([side * 0.045, np.cross(side, fwd) * 0.014, fwd * 0.05], axis=1), o, skin)
+    b.oriented_box(palm_c, np.stack([side * 0.045, np.cross(side, fwd) * 0.014, fwd * 0.05], axis=1), o, skin)
     for k in range(4):
         base = palm_c + fwd * 0.05 + side * (-0.034 + 0.0227 * k)
         tip = base + (fwd + side * (k - 1.5) * r.uniform(0.0, 0.12)) * r.uniform(0.06, 0.085)

@@ -47,7 +47,7 @@ class Frame:
         object_info: ``[{"id", "name", "main", "pixels"}]``, id 1 = main.
         camera: the left camera (baseline in mm).
         ndisp: SGBM disparity range (GT max rounded up to a multiple of 16).
-        meta: family, camera, seed, sub_seed, pitch_deg, height_m, scale, ... (for objects.json).
+        meta: family, camera, seed, sub_seed, pitch_deg, height_m, scene_scale, ... (for objects.json).
 
     Shape:
         - disparity, disparity_right, sgbm, objects: :math:`(H, W)`.
@@ -191,7 +191,7 @@ def generate_frame(family: str, seed: int, camera: str = "oakd", *, scale: float
         sgbm_map = torch.where(valid, d, torch.full_like(d, math.inf))
     pose = layout.pose
     meta = {"family": family, "camera": camera, "seed": seed, "sub_seed": sub, "pitch_deg": round(pose.pitch_deg, 3),
-            "yaw_deg": round(pose.yaw_deg, 3), "height_m": round(pose.height_m, 4), "scale": round(layout.scale, 4),
+            "yaw_deg": round(pose.yaw_deg, 3), "height_m": round(pose.height_m, 4), "scene_scale": round(layout.scale, 4),
             "width": width, "height": height, "ndisp": ndisp, "min_pixels": min_px,
             "sky_fraction": round(float((~torch.isfinite(pair.depth_left)).float().mean()), 4)}
     return Frame(left=left, right=right, disparity=pair.disp_left, disparity_right=pair.disp_right, sgbm=sgbm_map,
