@@ -191,12 +191,14 @@ def unit_normal(prim: Primitive, q: torch.Tensor) -> torch.Tensor:
         n = torch.zeros_like(q)
         n[:, 2] = 1.0
     else:  # cylinder, cone: side or cap
+        # side or cap: whichever surface the point lies closer to (robust to float32 round-off)
+        r = (q[:, 0] ** 2 + q[:, 1] ** 2).sqrt()
         if prim.kind == "cylinder":
             side = torch.stack([q[:, 0], q[:, 1], torch.zeros_like(q[:, 0])], -1)
-            cap = (q[:, 2].abs() > 1.0 - 1e-6) & (q[:, 0] ** 2 + q[:, 1] ** 2 < 1.0 - 1e-6)
+            cap = (q[:, 2].abs() - 1.0).abs() < (r - 1.0).abs()
         else:
-            side = torch.stack([q[:, 0], q[:, 1], 0.5 * (1.0 - q[:, 2])], -1)
-            cap = q[:, 2] < -1.0 + 1e-6
+            side = torch.stack([q[:, 0], q[:, 1], 0.25 * (1.0 - q[:, 2])], -1)  # grad of x²+y²-(1-z)²/4, halved
+            cap = (q[:, 2] + 1.0).abs() < (r - 0.5 * (1.0 - q[:, 2])).abs()
         capn = torch.zeros_like(q)
         capn[:, 2] = torch.sign(q[:, 2])
         n = torch.where(cap[:, None], capn, side)

@@ -96,3 +96,24 @@ def test_right_view_warped_by_gt_disparity_matches_left(builder, render, texture
     # and the check can fail: shifting by one extra pixel breaks it
     off = (_warp_right_to_left(pair.rgb_right, d + 1.0) - pair.rgb_left).abs().amax(-1)[visible]
     assert float(off.median()) > 2 * float(err.median()) + 0.005
+
+
+@pytest.mark.parametrize("kind", ["cylinder", "cone"])
+def test_normals_of_sides_and_caps(builder, textured, kind):
+    """Side at half height: horizontal (cylinder) or tilted up by the half angle (cone); bottom cap: -Z."""
+    from somtorch.synth.geometry import to_local, unit_normal
+
+    (builder.cylinder if kind == "cylinder" else builder.cone)(0.0, 2.0, 0.0, 0.3, 1.0, 1, textured())
+    prim = builder.prims[0]
+
+    def normal_at(origin, direction):
+        o, d = torch.tensor(origin), torch.tensor([direction])
+        t = intersect(prim, o, d)
+        return t, unit_normal(prim, to_local(prim, o + t[:, None] * d, d)[0])[0]
+
+    _, n = normal_at([0.0, 0.0, 0.5], [0.0, 1.0, 0.0])
+    tilt = 0.0 if kind == "cylinder" else math.atan(0.3)  # cone: radius 0.3 over height 1
+    torch.testing.assert_close(n, torch.tensor([0.0, -math.cos(tilt), math.sin(tilt)]), atol=1e-5, rtol=0)
+    t, n = normal_at([0.05, 2.05, -1.0], [0.0, 0.0, 1.0])  # from below, looking up at the base
+    assert abs(float(t[0]) - 1.0) < 1e-5
+    torch.testing.assert_close(n, torch.tensor([0.0, 0.0, -1.0]), atol=1e-5, rtol=0)
