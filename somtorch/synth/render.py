@@ -27,7 +27,7 @@ __all__ = ["Hits", "cast", "pixel_rays", "shade", "texture_value"]
 
 _MISS = 1e30
 _AMBIENT = 0.35
-_N_WAVES = 12
+_N_WAVES = 24
 DTYPE = torch.float32
 
 
