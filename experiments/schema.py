@@ -103,7 +103,8 @@ class SynthConfig:
         start: first seed.
         scale: image size factor (1 = each camera's full size).
         workers: processes, one frame per task (each on one thread).
-        cache: root of the cache; null = ``$SOMTORCH_CACHE/corpus`` or ``~/.cache/somtorch/corpus``.
+        cache: the corpus folder; null = ``$SOMTORCH_CORPUS``, else ``$SOMTORCH_CACHE/corpus``, else
+            ``~/.cache/somtorch/corpus`` (what ``experiments.datasets`` reads).
     """
 
     families: list[str] = field(default_factory=lambda: ["stairs", "garden", "road", "room", "tabletop", "hands",

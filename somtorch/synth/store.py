@@ -1,8 +1,8 @@
 """Synthetic frames on disk: the Middlebury layout :func:`~somtorch.disparity.load_scene` reads.
 
-Cache layout (root: ``$SOMTORCH_CACHE`` or ``~/.cache/somtorch``, then ``corpus/``)::
+Cache layout (root: ``$SOMTORCH_CORPUS``, else ``$SOMTORCH_CACHE/corpus``, else ``~/.cache/somtorch/corpus``)::
 
-    <root>/corpus/<family>_<camera>[_x<scale>]/
+    <root>/<family>_<camera>[_x<scale>]/
         manifest.json            {"generator": <hash>, "frames": {"00007": {"generator", "objects", "main", ...}}}
         00007/
             disp0GT.pfm          GT disparity of the left view (inf = the ray hit nothing: sky)
@@ -43,7 +43,10 @@ VERSIONS = {"gt": None, "sgbm": "disp_sgbm.pfm"}
 
 
 def cache_root() -> Path:
-    """``$SOMTORCH_CACHE/corpus`` or ``~/.cache/somtorch/corpus``."""
+    """The corpus: ``$SOMTORCH_CORPUS``, else ``$SOMTORCH_CACHE/corpus``, else ``~/.cache/somtorch/corpus``
+    (the folder :func:`experiments.datasets.corpus_dir` reads)."""
+    if os.environ.get("SOMTORCH_CORPUS"):
+        return Path(os.environ["SOMTORCH_CORPUS"]).expanduser()
     base = os.environ.get("SOMTORCH_CACHE")
     return (Path(base).expanduser() if base else Path.home() / ".cache" / "somtorch") / "corpus"
 

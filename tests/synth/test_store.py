@@ -57,3 +57,14 @@ def test_ensure_frame_skips_current_frames_and_regenerates_stale_ones(tmp_path):
     assert read_manifest(dataset)["frames"]["00000"]["generator"] == generator_version()
     scene = load_frame("fence", 0, "oakd", "sgbm", scale=0.25, root=tmp_path)
     assert scene.name == "fence_oakd_00000_sgbm" and scene.source["disparity"].endswith("disp_sgbm.pfm")
+
+
+def test_the_corpus_folder_is_the_one_the_dataset_registry_reads(tmp_path, monkeypatch):
+    from experiments.datasets import corpus_dir
+    from somtorch.synth import cache_root
+
+    monkeypatch.delenv("SOMTORCH_CORPUS", raising=False)
+    monkeypatch.setenv("SOMTORCH_CACHE", str(tmp_path / "c"))
+    assert cache_root() == corpus_dir() == tmp_path / "c" / "corpus"
+    monkeypatch.setenv("SOMTORCH_CORPUS", str(tmp_path / "k"))
+    assert cache_root() == corpus_dir() == tmp_path / "k"
