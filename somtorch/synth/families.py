@@ -248,18 +248,22 @@ def hands(b: Builder, seed: int) -> Pose:
     r = b.rng
     b.ground(b.material("ground"))
     desk = r.uniform(0.7, 0.78)
-    pose = Pose(0.0, 0.0, desk + r.uniform(0.3, 0.5), r.uniform(15, 45), r.uniform(-5, 5))
+    height = desk + r.uniform(0.3, 0.5)
     b.box_on(0.0, 0.6, desk - 0.04, (2.0, 1.4, 0.04), 0, b.material("wood", stripes=0.1))
     b.wall(0.0, r.uniform(1.4, 2.5), r.uniform(-0.4, 0.4), 20.0, 5.0, b.material("wall"))
-    for _ in range(int(r.integers(1, 3)) if r.uniform() < 0.4 else 1):
-        _arm(b, r.uniform(-0.2, 0.2), desk)
+    palms = [_arm(b, r.uniform(-0.2, 0.2), desk) for _ in range(int(r.integers(1, 3)) if r.uniform() < 0.4 else 1)]
     for x, y in b.scatter(int(r.integers(0, 3)), [0.06] * 2, (-0.35, 0.35), (0.55, 0.9)):
         parts.small_object(b, x, y, desk, r.uniform(0.06, 0.14), r.uniform(-math.pi, math.pi))
-    return pose
+    # aim at the hands (off-centre by up to a third of the half field of view)
+    px, py, pz = np.mean(palms, axis=0)
+    half_fov = math.degrees(math.atan(b.camera.height / (2 * b.camera.focal_px)))
+    pitch = math.degrees(math.atan2(height - pz, py)) + r.uniform(-1, 1) * half_fov / 3
+    yaw = math.degrees(math.atan2(px, py)) + r.uniform(-1, 1) * half_fov / 3
+    return Pose(0.0, 0.0, height, float(np.clip(pitch, 5, 60)), yaw)
 
 
-def _arm(b: Builder, x: float, desk: float) -> int:
-    """A forearm reaching towards the camera with an open hand (palm + four fingers + thumb)."""
+def _arm(b: Builder, x: float, desk: float) -> np.ndarray:
+    """A forearm reaching towards the camera with an open hand (palm + four fingers + thumb); the palm centre."""
     r = b.rng
     o = b.new_object("hand")
     skin, sleeve = b.material("skin", texture="noise"), b.material("object")
@@ -277,7 +281,7 @@ def _arm(b: Builder, x: float, desk: float) -> int:
         b.rod(base, tip, 0.009, o, skin)
     thumb = palm_c + side * 0.045
     b.rod(thumb, thumb + (fwd * 0.6 + side * 0.8) * 0.06, 0.011, o, skin)
-    return o
+    return palm_c
 
 
 FAMILIES: dict[str, Family] = {
