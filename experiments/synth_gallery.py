@@ -89,7 +89,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", default=str(ROOT / "docs" / "gallery"))
     a = p.parse_args(argv)
     for fam in a.families:
-        frames = [generate_frame(fam, s, a.cameras[i % len(a.cameras)], scale=a.scale) for i, s in enumerate(a.seeds)]
+        cams = [a.cameras[i % len(a.cameras)] for i in range(len(a.seeds))]
+        frames = [generate_frame(fam, s, cam, scale=a.scale) for s, cam in zip(a.seeds, cams)]
         print(plot_frames(frames, Path(a.out) / f"synth_{fam}.png"))
 
 

@@ -125,7 +125,7 @@ class Builder:
         self.box((x, y, z0 + size[2] / 2), size, obj, mat, yaw)
 
     def oriented_box(self, centre, axes, obj: int, mat: Material) -> None:
-        """Box ``centre ± axes[:, 0] ± axes[:, 1] ± axes[:, 2]`` (columns: half-extent vectors, any orientation)."""
+        """Box ``centre ± a0 ± a1 ± a2``, ``a_i`` the columns of ``axes`` (half extents, any orientation)."""
         self._add("box", np.asarray(centre, float), np.asarray(axes, float), obj, mat)
 
     def rod(self, p0, p1, radius: float, obj: int, mat: Material) -> None:
@@ -135,7 +135,8 @@ class Builder:
         perp = _frame_around(half) * radius
         self._add("cylinder", (p0 + p1) / 2, np.stack([perp[:, 0], perp[:, 1], half], axis=1), obj, mat)
 
-    def cylinder(self, x: float, y: float, z0: float, radius: float, height: float, obj: int, mat: Material) -> None:
+    def cylinder(self, x: float, y: float, z0: float, radius: float, height: float, obj: int,
+                 mat: Material) -> None:
         """Upright cylinder standing on height ``z0``."""
         self._add("cylinder", np.array([x, y, z0 + height / 2]), np.diag([radius, radius, height / 2]), obj, mat)
 
@@ -155,7 +156,7 @@ class Builder:
         self._add("plane", np.asarray(centre, float), np.stack([ex, ey, n / np.linalg.norm(n)], axis=1), obj, mat)
 
     def wall(self, x: float, y: float, yaw: float, width: float, height: float, mat: Material) -> None:
-        """Vertical support rectangle standing on the ground, centred at ``(x, y)``, facing ``-Y`` turned by yaw."""
+        """Vertical support rectangle on the ground, centred at ``(x, y)``, facing ``-Y`` turned by ``yaw``."""
         ex = _rot_z(yaw) @ np.array([width / 2, 0.0, 0.0])
         self.rect((x, y, height / 2), ex, (0.0, 0.0, height / 2), 0, mat)
 

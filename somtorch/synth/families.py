@@ -79,7 +79,8 @@ def stairs(b: Builder, seed: int) -> Pose:
     if extra < 0.35:  # something on a step
         i = int(r.integers(0, n))
         ly, lx = i * run + run / 2, r.uniform(-width / 3, width / 3)
-        parts.small_object(b, x0 + c * lx - s * ly, y0 + s * lx + c * ly, (i + 1) * rise, r.uniform(0.15, 0.25), yaw)
+        parts.small_object(b, x0 + c * lx - s * ly, y0 + s * lx + c * ly, (i + 1) * rise,
+                           r.uniform(0.15, 0.25), yaw)
     elif extra < 0.7:  # beside it
         side = r.choice([-1, 1])
         px, py = x0 + side * (width / 2 + r.uniform(0.5, 1.2)), y0 + r.uniform(-1.0, 1.0)
@@ -144,7 +145,8 @@ def fence(b: Builder, seed: int) -> Pose:
     pose = _forward(b, (1.0, 1.8))
     yf = r.uniform(3.0, 7.0)
     spacing, bar = r.uniform(0.12, 0.6), r.uniform(0.03, 0.08)
-    parts.lattice(b, r.uniform(-1, 1), yf, r.uniform(6, 14), r.uniform(0.9, 2.0), r.uniform(-0.4, 0.4), spacing, bar)
+    parts.lattice(b, r.uniform(-1, 1), yf, r.uniform(6, 14), r.uniform(0.9, 2.0), r.uniform(-0.4, 0.4),
+                  spacing, bar)
     taken: list[tuple[float, float, float]] = []
     behind = r.uniform() < 0.5
     yr = (yf + 1.0, yf + 6.0) if behind else (1.8, yf - 0.8)
@@ -198,14 +200,16 @@ def room(b: Builder, seed: int) -> Pose:
            b.material("wall"))
     if pose.height_m < 2.4:  # a ceiling, unless the camera looks down from above the walls (a drone)
         b.ground(b.material("wall", texture="low"), z=2.7)
-    makers = [lambda x, y, a: parts.table(b, x, y, (r.uniform(0.8, 1.6), r.uniform(0.6, 1.0)), r.uniform(0.7, 0.78), a),
+    makers = [lambda x, y, a: parts.table(b, x, y, (r.uniform(0.8, 1.6), r.uniform(0.6, 1.0)),
+                                          r.uniform(0.7, 0.78), a),
               lambda x, y, a: parts.chair(b, x, y, a),
               lambda x, y, a: parts.person(b, x, y, a),
               lambda x, y, a: _bed(b, x, y, a),
               lambda x, y, a: _cabinet(b, x, y, a)]
     n = int(r.integers(2, 5))
     taken: list[tuple[float, float, float]] = []
-    for x, y in b.scatter(n, [0.8] * n, (fx - reach, fx + reach), (fy - reach, min(fy + reach, back_y - 0.8)), taken):
+    y_range = (fy - reach, min(fy + reach, back_y - 0.8))
+    for x, y in b.scatter(n, [0.8] * n, (fx - reach, fx + reach), y_range, taken):
         makers[int(r.integers(len(makers)))](x, y, r.uniform(-math.pi, math.pi))
     return pose
 

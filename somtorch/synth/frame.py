@@ -145,7 +145,8 @@ def _to_uint8(rgb: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
     return img.permute(2, 0, 1).contiguous()  # (H, W, 3) -> (3, H, W)
 
 
-def generate_frame(family: str, seed: int, camera: str = "oakd", *, scale: float = 1.0, sgbm: bool = True) -> Frame:
+def generate_frame(family: str, seed: int, camera: str = "oakd", *, scale: float = 1.0,
+                   sgbm: bool = True) -> Frame:
     """Render one frame of ``family`` for ``camera``, deterministically from ``seed``.
 
     Args:
@@ -190,8 +191,9 @@ def generate_frame(family: str, seed: int, camera: str = "oakd", *, scale: float
         d, valid = compute_disparity(left, right, SGBMParams(numDisparities=ndisp))
         sgbm_map = torch.where(valid, d, torch.full_like(d, math.inf))
     pose = layout.pose
-    meta = {"family": family, "camera": camera, "seed": seed, "sub_seed": sub, "pitch_deg": round(pose.pitch_deg, 3),
-            "yaw_deg": round(pose.yaw_deg, 3), "height_m": round(pose.height_m, 4), "scene_scale": round(layout.scale, 4),
+    meta = {"family": family, "camera": camera, "seed": seed, "sub_seed": sub,
+            "pitch_deg": round(pose.pitch_deg, 3), "yaw_deg": round(pose.yaw_deg, 3),
+            "height_m": round(pose.height_m, 4), "scene_scale": round(layout.scale, 4),
             "width": width, "height": height, "ndisp": ndisp, "min_pixels": min_px,
             "sky_fraction": round(float((~torch.isfinite(pair.depth_left)).float().mean()), 4)}
     return Frame(left=left, right=right, disparity=pair.disp_left, disparity_right=pair.disp_right, sgbm=sgbm_map,

@@ -10,7 +10,8 @@ import math
 
 from somtorch.synth.builder import Builder
 
-__all__ = ["bench", "bush", "car", "chair", "cyclist", "lattice", "person", "pole", "sign", "small_object", "table", "tree"]
+__all__ = ["bench", "bush", "car", "chair", "cyclist", "lattice", "person", "pole", "sign", "small_object", "table",
+           "tree"]
 
 
 def _turn(x: float, y: float, yaw: float, dx: float, dy: float) -> tuple[float, float]:

@@ -63,7 +63,8 @@ def test_box_instance_mask_is_its_projected_silhouette(builder, render, textured
     drawn = drawn.astype(bool)
     iou = (mask & drawn).sum() / (mask | drawn).sum()
     assert mask.sum() > 5000 and iou > 0.97, iou
-    band = cv2.dilate(drawn.astype(np.uint8), np.ones((3, 3))) & ~cv2.erode(drawn.astype(np.uint8), np.ones((3, 3)))
+    kernel, d8 = np.ones((3, 3)), drawn.astype(np.uint8)
+    band = cv2.dilate(d8, kernel) & ~cv2.erode(d8, kernel)
     assert not ((mask ^ drawn) & ~band.astype(bool)).any(), "mismatches away from the silhouette's boundary"
 
 

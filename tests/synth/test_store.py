@@ -18,7 +18,8 @@ def test_load_scene_reads_a_written_frame_in_both_versions(tmp_path):
     valid = torch.isfinite(fr.disparity)
     assert torch.equal(gt.valid, valid) and torch.equal(gt.disparity[valid], fr.disparity[valid])
     assert torch.equal(gt.image, fr.left) and torch.equal(gt.objects, fr.objects)
-    assert [(o.id, o.name, o.main) for o in gt.object_info] == [(o["id"], o["name"], o["main"]) for o in fr.object_info]
+    expected = [(o["id"], o["name"], o["main"]) for o in fr.object_info]
+    assert [(o.id, o.name, o.main) for o in gt.object_info] == expected
     assert gt.main_object_mask is not None and gt.main_object_mask.sum() == fr.object_info[0]["pixels"]
     c = gt.camera
     assert (c.focal_px, c.cx, c.cy, c.doffs) == (fr.camera.focal_px, fr.camera.cx, fr.camera.cy, 0.0)
