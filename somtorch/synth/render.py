@@ -134,7 +134,9 @@ def texture_value(material: Material, points: torch.Tensor, footprint_m: torch.T
         - points: :math:`(N, 3)`; footprint_m: :math:`(N,)`; output :math:`(N,)`.
     """
     omega, phase = _waves(material)
-    arg = torch.addmm(phase, points, omega.T)  # (N, K): ω_k·p + φ_k
+    # (N, K): ω_k·p + φ_k, element-wise (addmm's BLAS sums differ in the last bit with the thread count)
+    arg = torch.outer(points[:, 0], omega[:, 0]).add_(phase)
+    arg.addcmul_(points[:, 1:2], omega[:, 1]).addcmul_(points[:, 2:3], omega[:, 2])
     wave = torch.sin_(arg)
     if material.texture == "stripes":
         wave = torch.tanh_(wave.mul_(2.5))

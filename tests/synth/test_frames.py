@@ -95,3 +95,11 @@ def test_bad_arguments_name_the_valid_choices():
         generate_frame("stairs", 0, "zed")
     with pytest.raises(ValueError, match="seed"):
         generate_frame("stairs", -1)
+
+
+def test_bytes_do_not_depend_on_the_thread_count():
+    """Workers render on one thread, a notebook on many: the frames must agree bit for bit."""
+    a = generate_frame("garden", 5, "kitti", scale=0.25, sgbm=False)
+    torch.set_num_threads(4)
+    b = generate_frame("garden", 5, "kitti", scale=0.25, sgbm=False)
+    assert torch.equal(a.left, b.left) and torch.equal(a.right, b.right) and torch.equal(a.disparity, b.disparity)
