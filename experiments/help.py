@@ -71,7 +71,7 @@ def help_text(name: str) -> str:
     groups = config_groups()
     module = "real_scenes" if name == "scenes" else name
     if module == "synth":  # not a pipeline run: its own keys only
-        from experiments.schema import SynthConfig
+        from experiments.synth_config import SynthConfig
 
         return "\n".join([f"python -m experiments.synth [key=value ...]", f"  {USAGE['synth']}", "",
                           "Keys (SynthConfig):"] + _fields(SynthConfig, ""))

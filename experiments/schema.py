@@ -18,6 +18,7 @@ from typing import Optional
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
+from experiments.synth_config import SynthConfig
 from somtorch.outputs import OutputConfig
 from somtorch.pipeline import PipelineConfig
 
@@ -92,31 +93,6 @@ class RunConfig(PipelineConfig):
     output: OutputConfig = field(default_factory=OutputConfig)
     paths: PathsConfig = field(default_factory=PathsConfig)
     label: str = "robust"  # a name for the configuration (set by presets; shown in tables)
-
-
-@dataclass
-class SynthConfig:
-    """``python -m experiments.synth``: generated frames written into the cache.
-
-    Attributes:
-        families: families to generate (``somtorch.synth.FAMILIES``).
-        cameras: cameras to generate for (``somtorch.synth.CAMERAS``).
-        n: frames per family x camera (seeds ``start`` to ``start + n - 1``).
-        start: first seed.
-        scale: image size factor (1 = each camera's full size).
-        workers: processes, one frame per task (each on one thread).
-        cache: the corpus folder; null = ``$SOMTORCH_CORPUS``, else ``$SOMTORCH_CACHE/corpus``, else
-            ``~/.cache/somtorch/corpus`` (what ``experiments.datasets`` reads).
-    """
-
-    families: list[str] = field(default_factory=lambda: ["stairs", "garden", "road", "room", "tabletop", "hands",
-                                                         "fence", "clutter"])
-    cameras: list[str] = field(default_factory=lambda: ["oakd"])
-    n: int = 10
-    start: int = 0
-    scale: float = 1.0
-    workers: int = 2
-    cache: Optional[str] = None
 
 
 def register() -> None:

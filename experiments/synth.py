@@ -25,7 +25,8 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.schema import SynthConfig, register
+from experiments.schema import register
+from experiments.synth_config import SynthConfig
 
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 log = logging.getLogger("somtorch.synth")

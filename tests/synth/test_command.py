@@ -50,3 +50,13 @@ def test_help_lists_the_command_keys(capsys):
         maybe_print_help("synth", ["--help"])
     out = capsys.readouterr().out
     assert "families=" in out and "cameras=" in out and "workers=" in out and "SOMConfig" not in out
+
+
+def test_help_does_not_import_torch():
+    import subprocess
+    import sys
+
+    code = "import sys; from experiments.help import help_text; help_text('synth'); print('torch' in sys.modules)"
+    proc = subprocess.run([sys.executable, "-c", code], cwd=CONF.parent, capture_output=True, text=True, timeout=60)
+    assert proc.stdout.strip() == "False", proc.stderr
+
