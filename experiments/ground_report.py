@@ -1,0 +1,67 @@
+"""The ground step alone on every development scene: plane found or not, its inlier share and the
+share of the labelled objects' pixels inside its mask, under two ground configs side by side.
+
+    python -m experiments.ground_report                         # defaults vs the support rule
+    python -m experiments.ground_report --before rule=position --after rule=support max_top_frac=1
+
+(``somtorch-validate`` runs the whole pipeline 30 times per scene; this reads only the ground step,
+seconds per scene.) Prints a Markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import fields, replace
+
+from experiments.scenes import dev_scenes, load_dev_scene
+
+
+def _config(pairs: list[str]):
+    from somtorch.config import GroundConfig
+
+    types = {f.name: f.type for f in fields(GroundConfig)}
+    kw = {}
+    for p in pairs:
+        k, v = p.split("=", 1)
+        if k not in types:
+            raise SystemExit(f"unknown ground key {k!r}; known: {sorted(types)}")
+        t = types[k] if isinstance(types[k], str) else types[k].__name__
+        kw[k] = (v.lower() in ("1", "true", "yes")) if t == "bool" else int(v) if t == "int" else \
+            float(v) if t == "float" else v
+    return replace(GroundConfig(), **kw)
+
+
+def _row(scene, cfg) -> tuple[str, str]:
+    from somtorch.disparity.filters import remove_speckles
+    from somtorch.evaluation import ground_object_share
+    from somtorch.tasks.ground import fit_ground_plane
+
+    valid = remove_speckles(scene.disparity, scene.valid, max_size_frac=0.0)
+    g = fit_ground_plane(scene.disparity, valid, cfg)
+    if g is None:
+        return "no", "–"
+    return f"yes ({g.inlier_frac:.0%})", f"{ground_object_share(g, scene):.1%}"
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default=str(__import__("pathlib").Path(__file__).resolve().parents[1].parent
+                                          / "shared" / "data"))
+    ap.add_argument("--before", nargs="*", default=[], help="ground key=value pairs (default: the defaults)")
+    ap.add_argument("--after", nargs="*", default=["rule=support"], help="ground key=value pairs")
+    ap.add_argument("--scenes", nargs="*", default=None)
+    a = ap.parse_args(argv)
+    before, after = _config(a.before), _config(a.after)
+    print(f"before: {' '.join(a.before) or 'defaults'}; after: {' '.join(a.after) or 'defaults'}\n")
+    print("| scene | plane before | plane after | objects in ground mask before | after | s |")
+    print("|---|---|---|---|---|---|")
+    for spec in dev_scenes(a.scenes):
+        scene = load_dev_scene(spec, a.data)
+        t0 = time.perf_counter()
+        (fb, sb), (fa, sa) = _row(scene, before), _row(scene, after)
+        print(f"| {spec.name} | {fb} | {fa} | {sb} | {sa} | {time.perf_counter() - t0:.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
