@@ -2,7 +2,7 @@
 share of the labelled objects' pixels inside its mask, under two ground configs side by side.
 
     python -m experiments.ground_report                         # defaults vs the support rule
-    python -m experiments.ground_report --before rule=position --after rule=support max_top_frac=1
+    python -m experiments.ground_report --after rule=either foot_frac=0.04
 
 (``somtorch-validate`` runs the whole pipeline 30 times per scene; this reads only the ground step,
 seconds per scene.) Prints a Markdown table.
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--data", default=str(__import__("pathlib").Path(__file__).resolve().parents[1].parent
                                           / "shared" / "data"))
     ap.add_argument("--before", nargs="*", default=[], help="ground key=value pairs (default: the defaults)")
-    ap.add_argument("--after", nargs="*", default=["rule=support"], help="ground key=value pairs")
+    ap.add_argument("--after", nargs="*", default=["rule=support"], help="ground key=value pairs (default: the support rule)")
     ap.add_argument("--scenes", nargs="*", default=None)
     a = ap.parse_args(argv)
     before, after = _config(a.before), _config(a.after)

@@ -36,7 +36,8 @@ class GroundConfig(Validated):
         max_top_frac: a plane covering more than this share of the valid pixels of the top third
             of the image is not ground (a wall or a slanted object). Position rule.
         support_frac: support rule: the plane holds at least this share of the valid pixels (a
-            floor or table top filling the view; a forward camera's floor holds 14–40 %).
+            floor or table top filling the view; a forward camera's floor holds 14–40 %, the
+            far-room slab of oakd_pov_controllers 55 %: docs/method.md).
         max_protrusion_frac: support rule: every image-connected piece of the pixels *above* the
             plane (nearer than its band where it is in view) holds at most this share of the valid
             pixels — objects standing on a surface are compact; a scene standing in front of a
@@ -50,7 +51,8 @@ class GroundConfig(Validated):
             cross the plane's band (an object's base, legs) stay out of the mask (0 = off).
         foot_frac: pixels within this share of the shorter image side of a protrusion (a pixel
             above the plane's band, in a solid 3 × 3 block) leave the mask: the
-            feet of the objects standing on the plane cross its band (every rule; 0 = off).
+            feet of the objects standing on the plane cross its band (every rule; applied after the
+            tests, so it changes the mask, not the verdict; 0 = off).
         iterations: RANSAC hypotheses.
         sample: pixels drawn for RANSAC (and, with ``constrained``, for the tests).
         seed: RANSAC seed (the result does not depend on the SOM seed).
@@ -83,7 +85,7 @@ class GroundConfig(Validated):
     seed: int = 0
     constrained: bool = True
     tries: int = 5
-    support_frac: float = 0.5
+    support_frac: float = 0.6
     max_protrusion_frac: float = 0.2
 
 

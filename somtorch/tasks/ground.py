@@ -206,8 +206,6 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     mask = ok & ((plane - d).abs() < tol)
     if cfg.slope_rows > 0:
         mask &= _follows_slope(disparity, ok, b, tol, max(1, round(cfg.slope_rows * h)))
-    if cfg.foot_frac > 0:
-        mask &= ~protrusion_feet(d - plane, ok, tol, max(1, round(cfg.foot_frac * min(h, w))))
     frac = int(mask.sum()) / n_valid
     if frac < cfg.min_inlier_frac:
         return None
@@ -223,6 +221,9 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
         and largest_protrusion(seen & (d > plane + tol)) <= cfg.max_protrusion_frac * n_valid
     if not _either(cfg.rule, position, support):
         return None
+    if cfg.foot_frac > 0:  # a refinement of the mask, not evidence against the plane: after the tests
+        mask &= ~protrusion_feet(d - plane, ok, tol, max(1, round(cfg.foot_frac * min(h, w))))
+        frac = int(mask.sum()) / n_valid
     return GroundPlane(a, b, c, tol, mask, frac, support)
 
 

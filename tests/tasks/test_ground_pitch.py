@@ -197,3 +197,17 @@ def test_forward_looking_real_scenes_keep_their_verdicts(shared_data, folder, fo
     if found:  # the same plane, verified by its position (a forward floor holds 14-40 % of the pixels)
         assert abs(either.b - today.b) < 0.01 and abs(either.inlier_frac - today.inlier_frac) < 0.02
         assert not either.support and support is None
+
+
+def test_the_support_plane_has_the_same_bits_at_one_and_two_threads():
+    d, valid, _ = render(60, cubes(60), noise_px=0.3)
+    before = torch.get_num_threads()
+    try:
+        planes = []
+        for n in (1, 2):
+            torch.set_num_threads(n)
+            g = fit_ground_plane(d, valid, SUPPORT)
+            planes.append((g.a, g.b, g.c, g.mask.clone()))
+    finally:
+        torch.set_num_threads(before)
+    assert planes[0][:3] == planes[1][:3] and torch.equal(planes[0][3], planes[1][3])
