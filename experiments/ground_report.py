@@ -49,7 +49,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--data", default=str(__import__("pathlib").Path(__file__).resolve().parents[1].parent
                                           / "shared" / "data"))
     ap.add_argument("--before", nargs="*", default=[], help="ground key=value pairs (default: the defaults)")
-    ap.add_argument("--after", nargs="*", default=["rule=support"], help="ground key=value pairs (default: the support rule)")
+    ap.add_argument("--after", nargs="*", default=["rule=support"],
+                    help="ground key=value pairs (default: the support rule)")
     ap.add_argument("--scenes", nargs="*", default=None)
     a = ap.parse_args(argv)
     before, after = _config(a.before), _config(a.after)

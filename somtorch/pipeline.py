@@ -161,7 +161,8 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     return valid, ground, usable, feats, train
 
 
-def on_support(scene: Scene, ground: GroundPlane | None, features: FeatureConfig) -> tuple[Scene, GroundPlane | None]:
+def on_support(scene: Scene, ground: GroundPlane | None,
+               features: FeatureConfig) -> tuple[Scene, GroundPlane | None]:
     """The scene and plane the segmentation and the object step read: as given, or — with
     ``features.d_mode="plane_residual"`` and a plane the support test verified
     (:attr:`~somtorch.tasks.ground.GroundPlane.support`) — the scene whose disparity is the height
@@ -176,8 +177,8 @@ def on_support(scene: Scene, ground: GroundPlane | None, features: FeatureConfig
         return scene, ground
     h, w = scene.disparity.shape
     height = relative_disparity(scene.disparity, ground.disparity(h, w))
-    return replace(scene, disparity=height), GroundPlane(0.0, 0.0, 0.0, ground.tol, ground.mask, ground.inlier_frac,
-                                                         ground.support)
+    level = GroundPlane(0.0, 0.0, 0.0, ground.tol, ground.mask, ground.inlier_frac, ground.support)
+    return replace(scene, disparity=height), level
 
 
 def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: PipelineConfig,
@@ -261,7 +262,8 @@ def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg
     if s == 1:
         return scene.disparity, scene.valid, labels, scene.image, ground, cfg
     g = None if ground is None else GroundPlane(ground.a * s, ground.b * s, ground.c, ground.tol,
-                                                ground.mask[::s, ::s].contiguous(), ground.inlier_frac, ground.support)
+                                                ground.mask[::s, ::s].contiguous(), ground.inlier_frac,
+                                                ground.support)
     image = None if scene.image is None else scene.image[:, ::s, ::s].contiguous()
     return (scene.disparity[::s, ::s].contiguous(), scene.valid[::s, ::s].contiguous(),
             labels[:, ::s, ::s].contiguous(), image, g, replace(cfg, grow_stride=max(1, cfg.grow_stride // s)))

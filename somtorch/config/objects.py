@@ -19,7 +19,7 @@ class GroundConfig(Validated):
     tilt in x ≤ tilt in y, ``max_top_frac``; RANSAC on the lower image half); ``"support"`` — by what
     the plane supports, at any camera pitch (``support_frac`` of the pixels on it, the pixels above
     it in compact protrusions of at most ``max_protrusion_frac``; RANSAC on the whole map);
-    ``"either"`` — a plane passing either. Every rule also needs ``min_inlier_frac`` and
+    ``"either"`` — a plane passing either (RANSAC on the lower half). Every rule also needs ``min_inlier_frac`` and
     ``max_below_frac`` (nothing substantial behind the plane).
 
     Attributes:

@@ -19,7 +19,8 @@ test of orientation or image position; the plane must hold ``support_frac`` of t
 have nothing substantial behind it (``max_below_frac``, as for every rule) and every image-connected
 piece of the pixels above it (nearer than its band, where it is in view) must be a compact
 protrusion of at most ``max_protrusion_frac`` of the pixels. ``"either"`` accepts a plane that
-passes one of the two.
+passes one of the two (RANSAC on the lower half, as the position rule). ``foot_frac`` then takes
+the feet of the protrusions out of the mask (:func:`protrusion_feet`).
 """
 
 from __future__ import annotations

@@ -31,7 +31,8 @@ def render(pitch_deg: float, boxes=(), noise_px: float = 0.0, seed: int = 0):
     ``(H, W)``; the floor's plane is ``d = b·y + c`` with ``b = B·cos θ / h``,
     ``c = f·B·sin θ / h − b·cy``."""
     th = math.radians(pitch_deg)
-    v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64), indexing="ij")
+    v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64),
+                          indexing="ij")
     rx, ry = (u - (W - 1) / 2) / FOCAL_PX, (v - (H - 1) / 2) / FOCAL_PX  # ray (rx, ry, 1), camera y down
     ray = (rx, -math.sin(th) * ry + math.cos(th), -(math.cos(th) * ry + math.sin(th)))  # right, forward, up
     t = torch.where(ray[2] < -1e-9, HEIGHT_M / -ray[2], torch.full_like(u, math.inf))  # floor at up = −h
@@ -40,14 +41,16 @@ def render(pitch_deg: float, boxes=(), noise_px: float = 0.0, seed: int = 0):
         near, far = torch.full_like(u, -math.inf), torch.full_like(u, math.inf)
         for r, lo, hi in zip(ray, (x0, z0, -HEIGHT_M), (x1, z1, -HEIGHT_M + tall)):
             r = torch.where(r.abs() < 1e-12, torch.full_like(r, 1e-12), r)
-            near, far = torch.maximum(near, torch.minimum(lo / r, hi / r)), torch.minimum(far, torch.maximum(lo / r, hi / r))
+            near = torch.maximum(near, torch.minimum(lo / r, hi / r))
+            far = torch.minimum(far, torch.maximum(lo / r, hi / r))
         hit = (near <= far) & (near > 0) & (near < t)
         t = torch.where(hit, near, t)
         objects[hit] = i
     d = FOCAL_PX * BASELINE_M / t  # the ray's z is 1: t is the depth
     valid = torch.isfinite(t)  # rays above the horizon see nothing
     if noise_px:
-        d = d + noise_px * torch.randn(H, W, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+        g = torch.Generator().manual_seed(seed)
+        d = d + noise_px * torch.randn(H, W, generator=g, dtype=torch.float64)
     objects[~valid] = 0
     return torch.where(valid, d, 0.0).float(), valid, objects
 
@@ -183,9 +186,9 @@ def test_the_pipeline_segments_heights_above_a_support_plane_only():
     assert on_support(scene, res.ground, FeatureConfig())[0] is scene
 
 
-@pytest.mark.parametrize("folder,found", [("middlebury2014/Motorcycle_Q", True), ("kitti2015/devkit_demo", True),
-                                          ("oakd_stereodemo/toy", True), ("sceneflow_flyingthings3d/A-0032-0006", False),
-                                          ("oakd_stereodemo/bedroom_chair", False)])
+@pytest.mark.parametrize("folder,found", [
+    ("middlebury2014/Motorcycle_Q", True), ("kitti2015/devkit_demo", True), ("oakd_stereodemo/toy", True),
+    ("sceneflow_flyingthings3d/A-0032-0006", False), ("oakd_stereodemo/bedroom_chair", False)])
 def test_forward_looking_real_scenes_keep_their_verdicts(shared_data, folder, found):
     from somtorch.disparity.loading import load_scene
 
