@@ -1,5 +1,6 @@
-"""The ground step alone on every development scene: plane found or not, its inlier share and the
-share of the labelled objects' pixels inside its mask, under two ground configs side by side.
+"""The ground step alone on the development frames (``conf/datasets.yaml``, synthetic ones left
+out unless named): plane found or not, its inlier share and the share of the labelled objects'
+pixels inside its mask, under two ground configs side by side.
 
     python -m experiments.ground_report                         # defaults vs the support rule
     python -m experiments.ground_report --after rule=either foot_frac=0.04
@@ -14,7 +15,7 @@ import argparse
 import time
 from dataclasses import fields, replace
 
-from experiments.scenes import dev_scenes, load_dev_scene
+from experiments.datasets import frames, load_frame
 
 
 def _config(pairs: list[str]):
@@ -51,14 +52,16 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--before", nargs="*", default=[], help="ground key=value pairs (default: the defaults)")
     ap.add_argument("--after", nargs="*", default=["rule=support"],
                     help="ground key=value pairs (default: the support rule)")
-    ap.add_argument("--scenes", nargs="*", default=None)
+    ap.add_argument("--datasets", nargs="*", default=None, help="dataset names (default: all)")
+    ap.add_argument("--frames", nargs="*", default=None, help="frame names (default: all)")
     a = ap.parse_args(argv)
     before, after = _config(a.before), _config(a.after)
     print(f"before: {' '.join(a.before) or 'defaults'}; after: {' '.join(a.after) or 'defaults'}\n")
-    print("| scene | plane before | plane after | objects in ground mask before | after | s |")
+    print("| frame | plane before | plane after | objects in ground mask before | after | s |")
     print("|---|---|---|---|---|---|")
-    for spec in dev_scenes(a.scenes):
-        scene = load_dev_scene(spec, a.data)
+    synthetic = None if a.datasets or a.frames else False
+    for spec in frames(a.datasets, a.frames, synthetic=synthetic):
+        scene = load_frame(spec, a.data)
         t0 = time.perf_counter()
         (fb, sb), (fa, sa) = _row(scene, before), _row(scene, after)
         print(f"| {spec.name} | {fb} | {fa} | {sb} | {sa} | {time.perf_counter() - t0:.1f} |", flush=True)
