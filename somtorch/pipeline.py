@@ -183,8 +183,10 @@ def on_support(scene: Scene, ground: GroundPlane | None,
 
 def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: PipelineConfig,
            timer: _Timer | None = None) -> list[MemberResult]:
-    """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d)."""
+    """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d), on the scene
+    and plane of :func:`on_support` (``ground`` as fitted)."""
     timer = timer or _Timer()
+    scene, ground = on_support(scene, ground, cfg.features)
     st = map_stride(scene, cfg)
     h, w = scene.disparity.shape
     with timer("objects"):  # every member segments the same pixels: one context for all
@@ -293,9 +295,9 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     cfg = cfg or PipelineConfig()
     timer = _Timer()
     valid, ground, usable, feats, train = prepare(scene, cfg, timer)
-    work, support = on_support(scene, ground, cfg.features)
+    work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
     seg = run_segmenter(feats, train, work, usable, cfg, progress=progress, log_training=log_training, timer=timer)
-    members = detect(work, seg, support, cfg, timer)
+    members = detect(scene, seg, ground, cfg, timer)
     runs = seg.labels.shape[0]
     qe = te = torch.full((runs,), float("nan"))
     if metrics and seg.som is not None:

@@ -115,7 +115,7 @@ class SequenceRunner:
         grid = st if self.warm and self.som is not None else 1
         valid, ground, usable, feats, train = prepare(scene, cfg, timer, ground_fn=ground_fn, grid=grid)
         warm = self.warm and self.som is not None and self.som.dim == train.x.shape[-1]
-        work, support = on_support(scene, ground, cfg.features)
+        work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
         if not warm and grid > 1:  # (features of another width than the map's: never with one config)
             valid, ground, usable, feats, train = prepare(scene, cfg, timer, ground_fn=lambda v: ground)
             grid = 1
@@ -134,7 +134,7 @@ class SequenceRunner:
         else:  # cold: exactly run_pipeline's segmenter
             seg = run_segmenter(feats, train, work, usable, cfg, timer=timer)
             self.som = seg.som
-        members = detect(work, seg, support, cfg, timer)
+        members = detect(scene, seg, ground, cfg, timer)
         t = dict(timer.t)
         t["ground"] = t.pop("clean", 0.0) + t.get("ground", 0.0)  # cleaning is part of the ground stage here
         t["objects"] = t.get("objects", 0.0) + t.pop("reduction", 0.0)
