@@ -139,8 +139,10 @@ def test_the_support_rule_refuses_a_plane_with_a_large_protrusion():
 
 
 def _object_neuron(d_mode: str, pitch: float) -> tuple[float, float]:
-    """An 8 × 8 map trained on a frame-filling floor (0.3 px matching noise) with a 1 % cube: the
-    share of the cube's pixels its main neuron holds, and the share of that neuron's pixels on it."""
+    """An 8 × 8 map trained on a frame-filling floor (0.3 px matching noise) with a 1 % cube — every
+    valid pixel, as the pipeline gives them to the map under ``plane_residual`` (the floor stays, at
+    height 0): the share of the cube's pixels its main neuron holds, and the share of that neuron's
+    pixels on it."""
     d, valid, objects = render(pitch, cubes(pitch, n=1), noise_px=0.3, seed=1)
     obj = objects > 0
     assert 0.005 < float(obj.float().mean()) < 0.02
