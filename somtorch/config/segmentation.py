@@ -20,6 +20,10 @@ class FeatureConfig(Validated):
         normalize: ``"image"`` (y, x scaled by the longer image side, d by the same factor after
             ``d_weight``), ``"minmax"`` (each feature to [0, 1], the paper's reading) or ``"none"``.
         d_weight: weight of the disparity feature (2 = disparity counts twice as much as position).
+        d_mode: the disparity feature: ``"raw"`` (d) or ``"plane_residual"`` (d − the verified ground
+            plane's disparity at the pixel, clipped at 0: the height of what protrudes from the support
+            surface, in disparity px; the object step then reads it too). Without a verified plane the
+            feature is d.
         train_stride: 1 = NOR (train on every valid pixel), 10 = OR (every 10th pixel in y and x,
             the paper's runtime-optimised mode); the whole map is always segmented.
         color_weight: append the left image's Y, Cb, Cr (each in [0, 1]) times this weight to
@@ -34,12 +38,14 @@ class FeatureConfig(Validated):
     _group: ClassVar[str] = "features"
     _constraints: ClassVar[dict[str, Any]] = {
         "normalize": Choice("somtorch.disparity.features:NORMALIZATIONS"),
-        "d_weight": POSITIVE, "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
+        "d_weight": POSITIVE, "d_mode": Choice("somtorch.disparity.features:D_MODES"),
+        "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
         "speckle_frac": Interval(0, 1), "reference_pixels": Interval(0, None, integer=True),
     }
 
     normalize: str = "image"
     d_weight: float = 2.0
+    d_mode: str = "raw"
     color_weight: float = 0.0
     train_stride: int = 10
     speckle_frac: float = 0.0

@@ -26,6 +26,7 @@ from ..config import FeatureConfig
 from ..validation import check_choice, check_positive, check_positive_int, check_tensor
 
 NORMALIZATIONS = ("image", "minmax", "none")
+D_MODES = ("raw", "plane_residual")  # FeatureConfig.d_mode: the pipeline applies it (relative_disparity)
 _F = FeatureConfig  # the defaults of make_features, declared once in somtorch.config
 
 
@@ -149,6 +150,20 @@ def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: st
     for j, col in enumerate(cols):  # column-wise: no (N, D) float64 temporaries
         torch.mul(col.to(dtype) - float(offset[j]), float(scale[j]), out=feats[:, j])
     return Features(feats, yx, offset.to(dtype), scale.to(dtype), (h, w), h * w - n, 1, usable)
+
+
+def relative_disparity(disparity: torch.Tensor, reference: torch.Tensor) -> torch.Tensor:
+    """``disparity − reference`` clipped at 0: the height of what stands on a support surface whose
+    disparity is ``reference`` (``features.d_mode="plane_residual"``), in disparity px. Pixels behind
+    the surface (matching noise, or what it does not hide) get 0, the surface's own level.
+
+    Shape:
+        ``disparity``, ``reference`` ``(H, W)`` → ``(H, W)``, the dtype of ``disparity``.
+
+    >>> relative_disparity(torch.tensor([[3.0, 5.0]]), torch.tensor([[4.0, 4.0]]))
+    tensor([[0., 1.]])
+    """
+    return (disparity - reference.to(disparity)).clamp_min_(0)
 
 
 def ycbcr(rgb: torch.Tensor) -> torch.Tensor:
