@@ -23,6 +23,7 @@ from typing import Any
 import torch
 
 from .config import PipelineConfig
+from .config.options import register_method
 from .core import SOM, StepInfo
 from .disparity.features import Features
 from .tasks.segmentation import segment
@@ -72,8 +73,9 @@ SEGMENTERS: dict[str, Segmenter] = {}
 
 
 def register(name: str, *, deterministic: bool = False, has_grid: bool = False) -> Callable:
-    """Decorator: register ``fn`` as the segmenter ``name``."""
+    """Decorator: register ``fn`` as the segmenter ``name`` (and ``name`` as a valid ``method``)."""
     def deco(fn: Callable[..., Segmentation]) -> Callable[..., Segmentation]:
+        register_method(name, deterministic)
         SEGMENTERS[name] = Segmenter(name, fn, deterministic, has_grid)
         return fn
     return deco

@@ -21,6 +21,7 @@ import torch
 from torch import nn
 
 from ..config import SOMConfig, TrainConfig
+from ..config.options import MODES, ORDERS
 from ..validation import check_choice, check_positive, check_positive_int, check_tensor, resolve
 from . import checkpoint
 from .decay import DECAYS, DecayFn
@@ -33,9 +34,7 @@ from .neighborhood import NEIGHBORHOODS, NeighborhoodFn
 from .threads import contended
 from .training import Callback, Order, Schedules, run
 
-MODES = ("online", "batch", "minibatch")
 _T, _S = TrainConfig, SOMConfig  # the defaults of fit (class attributes), declared once in somtorch.config
-ORDERS = ("sequential", "random")
 
 
 def _new_seed() -> int:

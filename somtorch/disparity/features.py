@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import torch
 
 from ..config import FeatureConfig
+from ..config.options import NORMALIZATIONS
 from ..validation import check_choice, check_positive, check_positive_int, check_tensor
 
-NORMALIZATIONS = ("image", "minmax", "none")
 _F = FeatureConfig  # the defaults of make_features, declared once in somtorch.config
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from experiments.scenes import dev_scenes, load_dev_scene
-from somtorch.disparity.scene import load_scene
+from somtorch.disparity import load_scene
 from somtorch.pipeline import PipelineConfig, run_pipeline
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
