@@ -19,14 +19,20 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
+import logging
+
 import torch
 
+from .bounds import BmuBounds
 from .decay import DecayFn, schedule
 from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search
 from .native import native_accumulate, native_online
 from .neighborhood import NeighborhoodFn, gaussian
 
-BLOCK_STEPS = 4096  # steps whose samples and schedule values are prepared at once (online rule)
+log = logging.getLogger(__name__)
+
+BLOCK_STEPS = 4096
+USE_BOUNDS = True  # the in-memory batch map skips BMU searches its bounds prove (exact either way)  # steps whose samples and schedule values are prepared at once (online rule)
 
 
 @dataclass
@@ -40,6 +46,8 @@ class StepInfo:
         lr: learning rate at this step, ``(E,)``.
         sigma: radius at this step, ``(E,)``.
         weight: the current weights ``(E, K, D)`` (a live view: copy it to keep it).
+        skipped: batch map: share of the samples whose BMU search the bounds skipped in this step
+            (:mod:`somtorch.core.bounds`); 0 otherwise.
     """
 
     step: int
@@ -48,6 +56,7 @@ class StepInfo:
     lr: torch.Tensor
     sigma: torch.Tensor
     weight: torch.Tensor
+    skipped: float = 0.0
 
 
 Callback = Callable[[StepInfo], None]
@@ -259,16 +268,21 @@ class Chunks:
         stats_dtype: dtype of the sums carried between chunks and of the batch-map target (None =
             the weights' dtype, which an in-memory epoch uses; float64 for many chunks).
         all_reduce: called in place on the epoch's sums and counts before the update.
+        bounds: per chunk, the bound state that lets the BMU search skip samples across epochs
+            (:class:`~somtorch.core.bounds.BmuBounds`); only for sources that yield the same chunks
+            every epoch (None: no bounds).
     """
 
     parts: Sequence[Callable[[], Iterable[torch.Tensor]]]
     stats_dtype: torch.dtype | None = None
     all_reduce: Callable[[torch.Tensor], None] | None = None
+    bounds: list[BmuBounds] | None = None
 
     @classmethod
     def of(cls, x: torch.Tensor) -> Chunks:
-        """Samples held in memory, ``(N, D)`` or ``(E, N, D)``: one partition of one chunk."""
-        return cls([lambda: (x,)])
+        """Samples held in memory, ``(N, D)`` or ``(E, N, D)``: one partition of one chunk, with
+        bounds (the same samples every epoch)."""
+        return cls([lambda: (x,)], bounds=[BmuBounds()] if USE_BOUNDS else None)
 
 
 def _add(total: tuple[torch.Tensor, torch.Tensor] | None, sums: torch.Tensor, counts: torch.Tensor,
@@ -281,8 +295,10 @@ def _add(total: tuple[torch.Tensor, torch.Tensor] | None, sums: torch.Tensor, co
 
 
 def batch_epoch(weight: torch.Tensor, source: Chunks, sigma: torch.Tensor, grid_d2: torch.Tensor,
-                neighborhood: NeighborhoodFn) -> None:
-    """One epoch of Kohonen's batch map over every chunk of ``source``, in place.
+                neighborhood: NeighborhoodFn, remaining: int = 1) -> float:
+    """One epoch of Kohonen's batch map over every chunk of ``source``, in place; returns the share
+    of BMU searches the bounds skipped (0 without bounds). ``remaining``: epochs left in the
+    schedule, this one included (the bounds start only when enough remain to repay the start).
 
     Shape:
         ``weight`` ``(E, K, D)``, ``sigma`` ``(E,)``, ``grid_d2`` ``(K, K)``.
@@ -291,13 +307,18 @@ def batch_epoch(weight: torch.Tensor, source: Chunks, sigma: torch.Tensor, grid_
         ValueError: the epoch saw no sample (and there is no all-reduce to bring any).
     """
     dt = source.stats_dtype or weight.dtype
-    total, seen = None, 0
+    total, seen, skipped, i = None, 0, 0.0, 0
     for part in source.parts:
         sub = None
         for chunk in part():
             if chunk.shape[-2] == 0:
                 continue
-            sub = _add(sub, *accumulate(chunk, weight), dt)
+            stats, bounds = None, source.bounds[i] if source.bounds and i < len(source.bounds) else None
+            if bounds is not None and bounds.plan(chunk, weight, remaining):
+                stats = bounds.accumulate(chunk, weight)  # None: the kernel cannot serve
+                skipped += bounds.skipped * chunk.shape[-2] if stats is not None else 0.0
+            i += 1
+            sub = _add(sub, *(stats or accumulate(chunk, weight)), dt)
             seen += int(chunk.shape[-2])
         if sub is not None:
             total = _add(total, *sub, dt)
@@ -313,6 +334,7 @@ def batch_epoch(weight: torch.Tensor, source: Chunks, sigma: torch.Tensor, grid_
         raise ValueError("the sources yielded no sample in this epoch")
     target, den = batch_target(sums, counts, sigma.to(dt), grid_d2.to(dt), neighborhood)
     _apply(weight, target, den, None)
+    return skipped / max(seen, 1)
 
 
 # ----------------------------------------------------------------------------- the engine
@@ -331,7 +353,7 @@ def _blocks(total: int, size: int, every: int | None) -> Iterator[tuple[int, int
 def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int, batch_size: int,
         order: Order, sched: Schedules, grid_d2: torch.Tensor, neighborhood: NeighborhoodFn,
         progress: bool = True, callback: Callback | None = None, callback_every: int | None = None,
-        desc: str = "SOM", offset: int = 0, total: int | None = None) -> None:
+        desc: str = "SOM", offset: int = 0, total: int | None = None) -> list[float]:
     """Train ``weight`` in place for ``steps`` steps of the given mode (see the module docstring).
 
     ``offset`` / ``total``: the steps are steps ``offset … offset + steps − 1`` of a schedule of
@@ -340,6 +362,9 @@ def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int
 
     ``x``: the samples ``(N, D)`` or ``(E, N, D)``; in batch mode also a :class:`Chunks` source
     (memory maps, partitions, an all-reduce): the batch map is one engine for all of them.
+
+    Returns the share of samples whose BMU search the bounds skipped, per step (batch mode; empty
+    for the other modes).
     """
     from tqdm.auto import tqdm
 
@@ -353,6 +378,7 @@ def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int
     every = callback_every
     block = BLOCK_STEPS if mode == "online" else 1
     cut_every = every if every else (n if mode == "online" else None)
+    skipped: list[float] = []
     bar = tqdm(total=steps, desc=desc, unit="step", disable=not progress, delay=0.5, leave=False)
     try:
         with torch.no_grad():
@@ -362,7 +388,10 @@ def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int
                     xs = _take(x, order.indices(offset + start, offset + stop))
                     online_block(weight, xs, lr, sigma, grid_d2, neighborhood)
                 elif mode == "batch":
-                    batch_epoch(weight, x, sigma[0], grid_d2, neighborhood)
+                    left = planned - offset - start  # epochs left in the schedule, this one included
+                    skipped.append(batch_epoch(weight, x, sigma[0], grid_d2, neighborhood, left))
+                    log.debug("batch epoch %d: BMU search skipped for %.1f %% of the samples", offset + stop,
+                              100 * skipped[-1])
                 else:
                     xs = _take(x, order.indices((offset + start) * batch_size, (offset + stop) * batch_size))
                     if xs.shape[0] == 1 and x.ndim == 2:
@@ -375,6 +404,8 @@ def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int
                     fire = (stop * per_step) // n > (start * per_step) // n
                 if callback is not None and (fire or stop == steps):
                     callback(StepInfo(step=stop, total=steps, epoch=stop * per_step / n,
-                                      lr=lr[-1], sigma=sigma[-1], weight=weight))
+                                      lr=lr[-1], sigma=sigma[-1], weight=weight,
+                                      skipped=skipped[-1] if mode == "batch" else 0.0))
     finally:
         bar.close()
+    return skipped
