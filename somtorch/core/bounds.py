@@ -19,13 +19,15 @@ determinism: elsewhere (GPU, ``SOMTORCH_NATIVE=0``) they are not used.
 **When they are used.** A bounded epoch pays only when nearly every search is skipped, and a
 fresh start (a top-2 search of every sample) costs several plain epochs; measured on the embedded
 motorcycle (``benchmarks/bench_bounds.py``, ``docs/scaling.md``): a bounded epoch beats the fused
-kernel only from about 90 % skipped searches, while the batch map's early epochs move the units far
-more than the gaps between first and second BMU (0 % skipped in the default 10-epoch job). So the
+kernel from about 90 % skipped searches (2.4–4× at 94 %), a start costs 8–18 plain epochs, and
+the batch map moves the units far more per epoch than the gaps between first and second BMU (at
+most 2 % skipped in the default 10-epoch job, 37 % in the 30th epoch of a 30-epoch one). So the
 bounds start only when a probe predicts they pay: while they are off, a fixed subsample of
 ``N / 16`` (at most 4,096) samples gets its two nearest units, and the share whose gap survives the
 last epoch's largest drift twice (``u + δ``, ``l − δ``) predicts the share the bounds would skip.
-They start when that share is at least :data:`START_SHARE` and at least :data:`START_EPOCHS` epochs
-remain to repay the start, and stop again when an epoch skips less than :data:`STOP_SHARE`.
+The probe runs only while at least :data:`START_EPOCHS` epochs remain to repay a start (so never in
+the default 10-epoch job), the bounds start when its share is at least :data:`START_SHARE`, and stop
+again when an epoch skips less than :data:`STOP_SHARE`.
 
 Memory: per member and sample one index and two float64 bounds (24 bytes).
 """
@@ -43,9 +45,12 @@ __all__ = ["BmuBounds"]
 log = logging.getLogger(__name__)
 
 _EPS64 = torch.finfo(torch.float64).eps
-START_SHARE = 0.9  # predicted share of skipped searches from which the bounds start (measured break-even)
-STOP_SHARE = 0.8  # an epoch that skips less stops them
-START_EPOCHS = 10  # epochs that must remain to repay a fresh start (one costs several plain epochs)
+# measured on the motorcycle, every pixel (benchmarks/bench_bounds.py, two runs under load, docs/scaling.md):
+# a bounded epoch costs 0.3-0.4x the fused kernel's at 94-100 % skipped searches, 0.25-1.5x at 78-88 %;
+# a start (top-2 search of every sample) costs 8-18 fused epochs
+START_SHARE = 0.9  # predicted share of skipped searches from which the bounds start
+STOP_SHARE = 0.8  # an epoch that skips less stops them (below break-even)
+START_EPOCHS = 20  # epochs that must remain to repay a start
 PROBE = 4096  # at most this many probe samples (and at most N / 16)
 
 
@@ -73,6 +78,7 @@ class BmuBounds:
         self._last: torch.Tensor | None = None  # (E, K, D) float64: the weights of the previous epoch
         self.skipped = 0.0
         self.active = False
+        self.counts: torch.Tensor | None = None  # (E, K): samples per unit in the last epoch (set by the engine)
 
     def reset(self) -> None:
         """Forget the bounds (a new start searches every sample)."""
@@ -81,13 +87,24 @@ class BmuBounds:
 
     def predict(self, x: torch.Tensor, weight: torch.Tensor) -> float:
         """Share of searches the bounds would skip if the weights moved again as far as in the
-        last epoch (0 at the first epoch): the probe of the module docstring."""
+        last epoch (0 at the first epoch): the probe of the module docstring, preceded by a free
+        upper bound from the units' nearest-neighbour distances (returned when it is already
+        below :data:`START_SHARE`)."""
         w64 = weight.detach().double()
         last, self._last = self._last, w64
         n = x.shape[-2]
         if last is None or last.shape != w64.shape or n < 32:
             return 0.0
         delta = (w64 - last).square_().sum(-1).sqrt_().amax(1, keepdim=True)  # (E, 1)
+        if self.counts is not None and self.counts.shape == w64.shape[:2]:
+            # free upper bound first: a sample's gap is at most its BMU's distance to the nearest other
+            # unit, so only samples of units whose nearest neighbour lies beyond 2δ can be skipped
+            nn = torch.cdist(w64, w64)
+            nn.diagonal(dim1=1, dim2=2).fill_(float("inf"))
+            c = self.counts.double()
+            most = float(((c * (nn.amin(2) > 2 * delta)).sum(1) / c.sum(1).clamp_min(1)).mean())
+            if most < START_SHARE:
+                return most
         step = max(16, -(-n // PROBE))
         xs = x[::step] if x.ndim == 2 else x[:, ::step]
         top = native_bmu(xs, weight, k=2)  # (E, S, 2)
@@ -101,9 +118,9 @@ class BmuBounds:
 
     def plan(self, x: torch.Tensor, weight: torch.Tensor, remaining: int) -> bool:
         """Whether this epoch (with ``remaining`` epochs left, this one included) uses the bounds."""
-        if not self.active:
+        if not self.active and remaining >= START_EPOCHS:  # fewer left: no start could repay itself
             share = self.predict(x, weight)
-            if share >= START_SHARE and remaining >= START_EPOCHS:
+            if share >= START_SHARE:
                 self.reset()  # a start searches every sample
                 self.active = True
                 log.debug("bounds start: probe predicts %.1f %% skipped searches, %d epochs left",

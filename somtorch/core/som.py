@@ -334,9 +334,10 @@ class SOM(nn.Module):
             stream_order._epoch, stream_order._perm = cached[1], cached[2]
         # on a busy CPU: no more torch threads than the cores other processes leave free (same bits)
         with contended() if self.weight.device.type == "cpu" else nullcontext():
-            self.skipped = run(self.weight.data, x, mode=mode, steps=steps, batch_size=batch_size, order=stream_order,
-                sched=sched, grid_d2=self.grid_d2, neighborhood=nb, progress=progress, callback=callback,
-                callback_every=callback_every, desc=f"SOM {mode}", offset=offset, total=total)
+            self.skipped = run(self.weight.data, x, mode=mode, steps=steps, batch_size=batch_size,
+                               order=stream_order, sched=sched, grid_d2=self.grid_d2, neighborhood=nb,
+                               progress=progress, callback=callback, callback_every=callback_every,
+                               desc=f"SOM {mode}", offset=offset, total=total)
         self._order_state = ((stream_order.kind, n), stream_order._epoch, stream_order._perm) \
             if self._plan is not None else None
         return self

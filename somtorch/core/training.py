@@ -16,10 +16,9 @@ seed would.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
-
-import logging
 
 import torch
 
@@ -31,8 +30,8 @@ from .neighborhood import NeighborhoodFn, gaussian
 
 log = logging.getLogger(__name__)
 
-BLOCK_STEPS = 4096
-USE_BOUNDS = True  # the in-memory batch map skips BMU searches its bounds prove (exact either way)  # steps whose samples and schedule values are prepared at once (online rule)
+BLOCK_STEPS = 4096  # steps whose samples and schedule values are prepared at once (online rule)
+USE_BOUNDS = True  # the in-memory batch map may skip BMU searches its bounds prove (exact either way)
 
 
 @dataclass
@@ -318,7 +317,10 @@ def batch_epoch(weight: torch.Tensor, source: Chunks, sigma: torch.Tensor, grid_
                 stats = bounds.accumulate(chunk, weight)  # None: the kernel cannot serve
                 skipped += bounds.skipped * chunk.shape[-2] if stats is not None else 0.0
             i += 1
-            sub = _add(sub, *(stats or accumulate(chunk, weight)), dt)
+            stats = stats or accumulate(chunk, weight)
+            if bounds is not None:
+                bounds.counts = stats[1]
+            sub = _add(sub, *stats, dt)
             seen += int(chunk.shape[-2])
         if sub is not None:
             total = _add(total, *sub, dt)

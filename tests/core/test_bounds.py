@@ -96,3 +96,17 @@ def test_the_default_job_keeps_the_fused_kernel(motorcycle):
     bounds off (measured: docs/scaling.md), and the stats say so."""
     som = SOM(8, 8, 3, seed=0).fit(motorcycle, mode="batch", progress=False)
     assert som.skipped == [0.0] * 10
+
+
+def test_the_probe_predicts_the_skipped_share(motorcycle):
+    """The probe's share (the last epoch's drift assumed again) is what the bounds then skip."""
+    w = SOM(8, 8, 3, seed=0).fit(motorcycle, mode="batch", progress=False).weight.detach().clone()
+    dirs = torch.randn(w.shape, generator=torch.Generator().manual_seed(1))
+    dirs /= dirs.norm(dim=-1, keepdim=True)
+    for step, lo, hi in ((1e-4, 0.9, 1.0), (0.05, 0.0, 0.1)):
+        probe, real = BmuBounds(), BmuBounds()
+        probe.predict(motorcycle, w - step * dirs)
+        predicted = probe.predict(motorcycle, w)  # the units moved by `step` in the last epoch
+        real.accumulate(motorcycle, w)
+        real.accumulate(motorcycle, w + step * dirs)
+        assert lo <= predicted <= hi and abs(predicted - real.skipped) < 0.1
