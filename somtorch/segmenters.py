@@ -122,6 +122,7 @@ def _som(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg
             log_training("train/quantization_error", float(som.quantization_error(x).mean()), step)
             log_training("train/topographic_error", float(som.topographic_error(x).mean()), step)
             log_training("train/sigma", float(info.sigma.mean()), step)
+            log_training("train/bmu_skipped", info.skipped, step)
     if tc.parallel != "none":
         som = _fit_parallel(som, train, cfg)
     else:
