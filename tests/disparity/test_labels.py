@@ -62,12 +62,12 @@ def test_malformed_files_name_the_field(tmp_path, objects, extra, field):
 def test_repository_labels_fit_their_scenes(shared_data):
     """The labels of conf/labels: each object lies mostly on valid disparity and the main one is
     the one of most valid pixels among those that are not mostly in the no-disparity columns."""
-    from experiments.scenes import dev_scenes, load_dev_scene
+    from experiments.datasets import frames, load_frame
 
-    specs = [s for s in dev_scenes() if s.labels]
-    assert len(specs) == 4
+    specs = [s for s in frames(synthetic=False) if s.labels and s.disparity == "gt"]
+    assert len(specs) >= 4
     for spec in specs:
-        scene = load_dev_scene(spec, shared_data)
+        scene = load_frame(spec, shared_data)
         assert scene.main_object_mask is not None and sum(o.main for o in scene.object_info) == 1
         for o in scene.object_info:
             m = scene.object_mask(o.id)
