@@ -137,7 +137,7 @@ class BmuBounds:
         """
         e, k, d = weight.shape
         n = x.shape[-2]
-        w64 = weight.detach().double()  # differences of float32 weights are exact in float64
+        w64 = weight.detach().double()  # float32 differences: exact in float64 or within the outward rounding
         drift = None
         if self._weight is not None and self._weight.shape == w64.shape and self.bmu.shape == (e, n):
             drift = (w64 - self._weight).square_().sum(-1).sqrt_().mul_(1 + 2 * (d + 2) * _EPS64)  # (E, K)
