@@ -43,7 +43,7 @@ def load_input(cfg: RunConfig):
     """The scene named by ``cfg.data`` (every check on the files happens here, before any work)."""
     from somtorch.disparity.io import read_image
     from somtorch.disparity.camera import read_calibration
-    from somtorch.disparity.scene import Camera, load_scene
+    from somtorch.disparity import Camera, load_scene
     from somtorch.disparity.stereo import SGBMParams, load_stereo_pair
 
     d = cfg.data

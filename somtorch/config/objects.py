@@ -6,7 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from ..constraints import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
+from . import options
+from .constraints import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
 
 
 # ---------------------------------------------------------------------------------- ground plane
@@ -63,7 +64,7 @@ class GroundConfig(Validated):
 
     _group: ClassVar[str] = "ground"
     _constraints: ClassVar[dict[str, Any]] = {
-        "enabled": BOOL, "rule": Choice("somtorch.tasks.ground:RULES"), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
+        "enabled": BOOL, "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_top_frac": FRACTION, "max_below_frac": FRACTION,
         "slope_rows": Interval(0, 0.25), "foot_frac": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
         "constrained": BOOL, "tries": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
@@ -164,14 +165,14 @@ class AreaConfig(Validated):
 
     _group: ClassVar[str] = "objects"
     _constraints: ClassVar[dict[str, Any]] = {
-        "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice("somtorch.tasks.objects:LINKS"),
-        "spread": Choice("somtorch.tasks.objects:SPREADS"), "min_boundary": NON_NEGATIVE,
+        "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice(options.LINKS),
+        "spread": Choice(options.SPREADS), "min_boundary": NON_NEGATIVE,
         "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "edge_rank": NON_NEGATIVE,
         "facing_rank": NON_NEGATIVE, "hierarchy": BOOL, "grow": BOOL, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
-        "select": Choice("somtorch.tasks.objects:SELECTIONS"), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
+        "select": Choice(options.SELECTIONS), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
         "keep_budget": Interval(0, 1, open_lo=True),
         "fail_safe": BOOL, "min_contrast": NON_NEGATIVE, "max_area_frac": Interval(0, 1, open_lo=True),
         "min_area_frac": FRACTION,

@@ -6,9 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from ..constraints import BOOL, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
-
-_SOM = "somtorch.core.som"
+from . import options
+from .constraints import BOOL, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
 
 
 # ----------------------------------------------------------------------------------- step 1a: input
@@ -37,8 +36,8 @@ class FeatureConfig(Validated):
 
     _group: ClassVar[str] = "features"
     _constraints: ClassVar[dict[str, Any]] = {
-        "normalize": Choice("somtorch.disparity.features:NORMALIZATIONS"),
-        "d_weight": POSITIVE, "d_mode": Choice("somtorch.disparity.features:D_MODES"),
+        "normalize": Choice(options.NORMALIZATIONS),
+        "d_weight": POSITIVE, "d_mode": Choice(options.D_MODES),
         "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
         "speckle_frac": Interval(0, 1), "reference_pixels": Interval(0, None, integer=True),
     }
@@ -78,8 +77,8 @@ class SOMConfig(Validated):
 
     _group: ClassVar[str] = "som"
     _constraints: ClassVar[dict[str, Any]] = {
-        "rows": POSITIVE_INT, "cols": POSITIVE_INT, "topology": Choice("somtorch.core.grid:TOPOLOGIES"),
-        "toroidal": BOOL, "init": Choice("somtorch.core.init:INITS"),
+        "rows": POSITIVE_INT, "cols": POSITIVE_INT, "topology": Choice(options.TOPOLOGIES),
+        "toroidal": BOOL, "init": Choice(options.INITS),
     }
 
     rows: int = 8
@@ -110,10 +109,10 @@ class TrainConfig(Validated):
 
     _group: ClassVar[str] = "train"
     _constraints: ClassVar[dict[str, Any]] = {
-        "mode": Choice(f"{_SOM}:MODES"), "epochs": POSITIVE_INT, "lr": POSITIVE,
+        "mode": Choice(options.MODES), "epochs": POSITIVE_INT, "lr": POSITIVE,
         "sigma": Interval(0, None, open_lo=True, optional=True),
-        "lr_decay": Choice("somtorch.core.decay:DECAYS"), "sigma_decay": Choice("somtorch.core.decay:DECAYS"),
-        "neighborhood": Choice("somtorch.core.neighborhood:NEIGHBORHOODS"), "order": Choice(f"{_SOM}:ORDERS"),
+        "lr_decay": Choice(options.DECAYS), "sigma_decay": Choice(options.DECAYS),
+        "neighborhood": Choice(options.NEIGHBORHOODS), "order": Choice(options.ORDERS),
         "batch_size": POSITIVE_INT, "parallel": OneOf(("none", "data", "members")),
     }
     _relations: ClassVar[list[tuple[Any, str]]] = [

@@ -30,9 +30,8 @@ from dataclasses import dataclass, field
 import torch
 
 from ..config import GroundConfig
+from ..config.options import GROUND_RULES as RULES
 from ..validation import check_tensor
-
-RULES = ("position", "support", "either")
 
 
 @dataclass
