@@ -216,7 +216,7 @@ def load_frame(spec: FrameSpec, data_dir: str | Path, corpus: str | Path | None 
         return load_dev_scene(spec, data_dir)
     import dataclasses
 
-    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity import load_scene
 
     folder = Path(corpus or corpus_dir()) / spec.folder
     if not folder.is_dir():

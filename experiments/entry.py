@@ -30,3 +30,7 @@ def scenes() -> None:
 
 def video() -> None:
     _go("video")
+
+
+def synth() -> None:
+    _go("synth")

@@ -20,6 +20,7 @@ USAGE = {
     "validate": "leave-one-scene-out validation of the object step's constants",
     "real_scenes": "the pipeline (and baselines) scored on named development scenes",
     "video": "a disparity sequence, each frame's SOM warm-started",
+    "synth": "generated stereo frames (GT + SGBM) into the cache (docs/synth.md)",
 }
 
 
@@ -69,6 +70,11 @@ def help_text(name: str) -> str:
 
     groups = config_groups()
     module = "real_scenes" if name == "scenes" else name
+    if module == "synth":  # not a pipeline run: its own keys only
+        from experiments.synth_config import SynthConfig
+
+        return "\n".join([f"python -m experiments.synth [key=value ...]", f"  {USAGE['synth']}", "",
+                          "Keys (SynthConfig):"] + _fields(SynthConfig, ""))
     lines = [f"python -m experiments.{module} [group=option ...] [key=value ...]",
              f"  {USAGE.get(module, '')}", "",
              "Config groups (group=option; '+preset=paper' and '+experiment=...' add one):"]

@@ -43,7 +43,7 @@ def load_input(cfg: RunConfig):
     """The scene named by ``cfg.data`` (every check on the files happens here, before any work)."""
     from somtorch.disparity.io import read_image
     from somtorch.disparity.camera import read_calibration
-    from somtorch.disparity.scene import Camera, load_scene
+    from somtorch.disparity import Camera, load_scene
     from somtorch.disparity.stereo import SGBMParams, load_stereo_pair
 
     d = cfg.data
@@ -65,6 +65,14 @@ def load_input(cfg: RunConfig):
                             baseline_unit=d.baseline_unit, doffs=d.doffs)
         return load_stereo_pair(left_path, right_path, SGBMParams(**dataclasses.asdict(d.sgbm)), camera=camera,
                                 name=d.name or Path(d.left).stem)
+    if d.family is not None:  # a generated frame (conf/data/synthetic.yaml), from the cache or made now
+        from somtorch.synth import load_frame
+
+        given = {"seed": d.seed, "camera": d.camera, "version": d.version}
+        scene = load_frame(d.family, **{k: v for k, v in given.items() if v is not None})
+        if d.name:
+            scene.name = d.name
+        return scene
     if d.source is None:
         raise ValueError("data.source is empty: give 'motorcycle', a scene folder or a disparity file")
     spec = d.source if d.source == "motorcycle" else to_absolute_path(d.source)

@@ -26,7 +26,7 @@ def load_dev_scene(spec: Any, data_dir: str | Path) -> Any:
 
 def _load(spec: Any, data_dir: Path) -> Any:
     from somtorch.disparity.io import read_image
-    from somtorch.disparity.scene import load_scene, scene_from_arrays
+    from somtorch.disparity import load_scene, scene_from_arrays
     from somtorch.disparity.stereo import SGBMParams, compute_disparity
 
     path = data_dir / spec.folder

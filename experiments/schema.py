@@ -19,6 +19,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from somtorch.config import ResourcesConfig
+from experiments.synth_config import SynthConfig
 from somtorch.outputs import OutputConfig
 from somtorch.pipeline import PipelineConfig
 
@@ -71,6 +72,11 @@ class DataConfig:
     calibration: Optional[str] = None
     # the official KITTI 2015 layout: source = the training folder, frame = its number
     frame: Optional[str] = None
+    # a generated frame (conf/data/synthetic.yaml, somtorch.synth): family, camera, seed, version gt|sgbm
+    family: Optional[str] = None
+    camera: Optional[str] = None
+    seed: Optional[int] = None
+    version: Optional[str] = None
 
 
 @dataclass
@@ -116,6 +122,7 @@ def register() -> None:
 
     cs = ConfigStore.instance()
     cs.store(name="run_schema", node=RunConfig)
+    cs.store(name="synth_schema", node=SynthConfig)
     # ${stem:${data.source}}: a file input's run folder and scene are named after the file
     OmegaConf.register_new_resolver("stem", lambda p: Path(str(p)).stem or "file", replace=True)
     # ${pair:${data.left}}: a stereo pair's run folder and scene are named after the left file, or

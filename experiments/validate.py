@@ -99,14 +99,14 @@ class SceneCache:
         import torch
 
         from somtorch.config import with_overrides
-        from somtorch.pipeline import detect, prepare
+        from somtorch.pipeline import detect, on_support, prepare
         from somtorch.segmenters import run_segmenter
 
         cfg = with_overrides(self.base, overrides)
         up = _key({k: v for k, v in overrides.items() if k.split(".")[0] in UPSTREAM})
         if up not in self._seg:
             valid, ground, usable, feats, train = prepare(self.scene, cfg)
-            seg = run_segmenter(feats, train, self.scene, usable, cfg)
+            seg = run_segmenter(feats, train, on_support(self.scene, ground, cfg.features)[0], usable, cfg)
             # kept as int16 (a SOM has far fewer neurons): 30 members x 22 scenes x every upstream
             # setting of the grid as int64 label maps outgrew 24 GiB
             small = seg.labels.to(torch.int16) if int(seg.labels.max()) < 2 ** 15 else seg.labels

@@ -6,7 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from ..constraints import BOOL, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
+from . import options
+from .constraints import BOOL, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
 from .objects import AreaConfig, GroundConfig
 from .segmentation import BaselineConfig, FeatureConfig, SOMConfig, TrainConfig
 
@@ -120,7 +121,7 @@ class PipelineConfig(Validated):
     the CPU)."""
 
     _constraints: ClassVar[dict[str, Any]] = {
-        "method": Choice("somtorch.segmenters:METHODS"), "ensemble": POSITIVE_INT,
+        "method": Choice(options.METHODS), "ensemble": POSITIVE_INT,
         "seed": Interval(0, None, integer=True), "object_id": Interval(1, None, integer=True, optional=True),
     }
 
@@ -140,9 +141,7 @@ class PipelineConfig(Validated):
     @property
     def runs(self) -> int:
         """Members actually computed: ``ensemble``, or 1 for a deterministic method."""
-        from ..segmenters import SEGMENTERS
-
-        return 1 if SEGMENTERS[self.method].deterministic else self.ensemble
+        return 1 if options.METHODS[self.method] else self.ensemble
 
 
 def with_overrides(cfg: PipelineConfig, overrides: dict[str, Any]) -> PipelineConfig:

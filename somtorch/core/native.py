@@ -49,7 +49,7 @@ logger = logging.getLogger(__name__)
 ENV_SWITCH = "SOMTORCH_NATIVE"  # "0" disables the native kernel
 ENV_CACHE = "SOMTORCH_CACHE_DIR"
 SOURCE = Path(__file__).resolve().parent / "csrc" / "bmu.cpp"
-ABI = 3  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
+ABI = 4  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
 BASE_FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off")
 BUILD_TIMEOUT_S = 300
 
@@ -166,6 +166,11 @@ def _load() -> ctypes.CDLL:
     for fn in (lib.somtorch_accumulate_f32, lib.somtorch_accumulate_f64):
         # x, x_stride, w, E, N, K, D, sums, counts, nthreads
         fn.argtypes = [p, i64, p, i64, i64, i64, i64, p, p, i32]
+        fn.restype = ctypes.c_int
+    for fn in (lib.somtorch_bounded_f32, lib.somtorch_bounded_f64):
+        # x, x_stride, w, E, N, K, D, c, u, l, drift, dmax, rho, alpha, grow, fresh, sums, counts, searched, nthreads
+        fn.argtypes = [p, i64, p, i64, i64, i64, i64, p, p, p, p, p, ctypes.c_double, ctypes.c_double,
+                       ctypes.c_double, i32, p, p, p, i32]
         fn.restype = ctypes.c_int
     for fn in (lib.somtorch_online_f32, lib.somtorch_online_f64):
         # w, xs, xs_stride, coef, log_lr, grid_d2, E, S, K, D, nthreads
@@ -285,6 +290,49 @@ def native_accumulate(x: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tens
         _note(_refusal(rc, e, n, kk, d))
         return None
     return sums, counts.to(weight.dtype)
+
+
+@torch.no_grad()
+def native_bounded(x: torch.Tensor, weight: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor, torch.Tensor],
+                   drift: torch.Tensor | None, slack: tuple[float, float, float]
+                   ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+    """:func:`native_accumulate` that searches only the samples whose bounds do not prove their
+    BMU (see :mod:`somtorch.core.bounds`); None if unsupported.
+
+    Args:
+        state: per member and sample the BMU ``(E, N)`` int64 and the upper / lower distance
+            bounds ``(E, N)`` float64, all contiguous, updated in place.
+        drift: how far each unit moved since the state was valid ``(E, K)`` float64, rounded
+            outwards; None searches every sample (a fresh state).
+        slack: ``(rho, alpha, grow)``: the kernel's relative and absolute distance error, and the
+            outward rounding of a computed distance.
+
+    Shape:
+        returns sums ``(E, K, D)``, counts ``(E, K)`` (the weights' dtype) and the number of
+        samples each member searched ``(E,)`` int64.
+    """
+    call = _prepare(x, weight, 2)
+    if call is None:
+        return None
+    lib, xc, wc, (e, kk, d, n) = call
+    c, u, lo = state
+    if drift is None:
+        drift_c = torch.zeros(e, kk, dtype=torch.float64)
+    else:
+        drift_c = drift.detach().to(torch.float64).contiguous()
+    dmax = drift_c.amax(1).contiguous()
+    sums = torch.zeros(e, kk, d, dtype=weight.dtype)
+    counts = torch.zeros(e, kk, dtype=torch.long)
+    searched = torch.zeros(e, dtype=torch.long)
+    fn = lib.somtorch_bounded_f32 if x.dtype == torch.float32 else lib.somtorch_bounded_f64
+    rho, alpha, grow = slack
+    rc = fn(xc.data_ptr(), 0 if x.ndim == 2 else n * d, wc.data_ptr(), e, n, kk, d, c.data_ptr(), u.data_ptr(),
+            lo.data_ptr(), drift_c.data_ptr(), dmax.data_ptr(), rho, alpha, grow, int(drift is None),
+            sums.data_ptr(), counts.data_ptr(), searched.data_ptr(), kernel_threads())
+    if rc != 0:
+        _note(_refusal(rc, e, n, kk, d))
+        return None
+    return sums, counts.to(weight.dtype), searched
 
 
 @torch.no_grad()

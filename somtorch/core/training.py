@@ -16,18 +16,23 @@ seed would.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+import logging
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import torch
 
 from .. import interrupt
+from .bounds import BmuBounds
 from .decay import DecayFn, schedule
 from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search
 from .native import native_accumulate, native_online
 from .neighborhood import NeighborhoodFn, gaussian
 
+log = logging.getLogger(__name__)
+
 BLOCK_STEPS = 4096  # steps whose samples and schedule values are prepared at once (online rule)
+USE_BOUNDS = True  # the in-memory batch map may skip BMU searches its bounds prove (exact either way)
 
 
 @dataclass
@@ -41,6 +46,8 @@ class StepInfo:
         lr: learning rate at this step, ``(E,)``.
         sigma: radius at this step, ``(E,)``.
         weight: the current weights ``(E, K, D)`` (a live view: copy it to keep it).
+        skipped: batch map: share of the samples whose BMU search the bounds skipped in this step
+            (:mod:`somtorch.core.bounds`); 0 otherwise.
     """
 
     step: int
@@ -49,6 +56,7 @@ class StepInfo:
     lr: torch.Tensor
     sigma: torch.Tensor
     weight: torch.Tensor
+    skipped: float = 0.0
 
 
 Callback = Callable[[StepInfo], None]
@@ -220,9 +228,21 @@ def batch_target(sums: torch.Tensor, counts: torch.Tensor, sigma: torch.Tensor, 
     return num / den.clamp_min(torch.finfo(den.dtype).tiny).unsqueeze(-1), den
 
 
+def _apply(weight: torch.Tensor, target: torch.Tensor, den: torch.Tensor, lr: torch.Tensor | None) -> None:
+    """``weight`` ← target (``lr`` None) or ``weight + lr (target − weight)``, where some sample
+    reaches the unit (``den`` > 0); in place. Shape: ``(E, K, D)``, ``den`` ``(E, K)``, ``lr`` ``(E,)``."""
+    reached = (den > 1e-12).unsqueeze(-1)
+    if lr is None:
+        torch.where(reached, target.to(weight.dtype), weight, out=weight)
+    else:
+        delta = torch.where(reached, target - weight, torch.zeros_like(weight))
+        weight.addcmul_(lr.view(-1, 1, 1), delta)
+
+
 def batch_step(weight: torch.Tensor, x: torch.Tensor, lr: torch.Tensor | None, sigma: torch.Tensor,
                grid_d2: torch.Tensor, neighborhood: NeighborhoodFn) -> None:
-    """One batch-map step on ``x`` (all data, or one mini-batch with learning rate ``lr``), in place.
+    """One batch-map step on the samples ``x`` held in memory (a mini-batch with learning rate
+    ``lr``, or all data with ``lr`` None), in place.
 
     Shape:
         ``weight`` ``(E, K, D)``, ``x`` ``(N, D)`` or ``(E, N, D)``, ``lr`` ``(E,)`` or None (= 1),
@@ -230,12 +250,94 @@ def batch_step(weight: torch.Tensor, x: torch.Tensor, lr: torch.Tensor | None, s
     """
     sums, counts = accumulate(x, weight)
     target, den = batch_target(sums, counts, sigma, grid_d2, neighborhood)
-    reached = (den > 1e-12).unsqueeze(-1)
-    if lr is None:
-        torch.where(reached, target, weight, out=weight)
-    else:
-        delta = torch.where(reached, target - weight, torch.zeros_like(weight))
-        weight.addcmul_(lr.view(-1, 1, 1), delta)
+    _apply(weight, target, den, lr)
+
+
+@dataclass
+class Chunks:
+    """The samples of one batch-map epoch as chunks: the data source of the batch engine.
+
+    In-memory data is one chunk (:meth:`of`); :mod:`somtorch.core.streaming` builds chunk sources
+    from memory maps, arrays and DataLoaders, and :mod:`somtorch.core.distributed` adds the
+    all-reduce of data-parallel training.
+
+    Attributes:
+        parts: partitions, each a callable returning a fresh iterable of chunks ``(n, D)`` or
+            ``(E, n, D)`` per epoch; each partition's sums are formed on their own and the
+            partition totals added in order (the order in which an all-reduce of two processes adds them).
+        stats_dtype: dtype of the sums carried between chunks and of the batch-map target (None =
+            the weights' dtype, which an in-memory epoch uses; float64 for many chunks).
+        all_reduce: called in place on the epoch's sums and counts before the update.
+        bounds: per chunk, the bound state that lets the BMU search skip samples across epochs
+            (:class:`~somtorch.core.bounds.BmuBounds`); only for sources that yield the same chunks
+            every epoch (None: no bounds).
+    """
+
+    parts: Sequence[Callable[[], Iterable[torch.Tensor]]]
+    stats_dtype: torch.dtype | None = None
+    all_reduce: Callable[[torch.Tensor], None] | None = None
+    bounds: list[BmuBounds] | None = None
+
+    @classmethod
+    def of(cls, x: torch.Tensor) -> Chunks:
+        """Samples held in memory, ``(N, D)`` or ``(E, N, D)``: one partition of one chunk, with
+        bounds (the same samples every epoch)."""
+        return cls([lambda: (x,)], bounds=[BmuBounds()] if USE_BOUNDS else None)
+
+
+def _add(total: tuple[torch.Tensor, torch.Tensor] | None, sums: torch.Tensor, counts: torch.Tensor,
+         dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    if total is None:  # the first term as it is (0 + s would turn a −0.0 into +0.0)
+        return sums.to(dtype), counts.to(dtype)
+    total[0].add_(sums.to(dtype))
+    total[1].add_(counts.to(dtype))
+    return total
+
+
+def batch_epoch(weight: torch.Tensor, source: Chunks, sigma: torch.Tensor, grid_d2: torch.Tensor,
+                neighborhood: NeighborhoodFn, remaining: int = 1) -> float:
+    """One epoch of Kohonen's batch map over every chunk of ``source``, in place; returns the share
+    of BMU searches the bounds skipped (0 without bounds). ``remaining``: epochs left in the
+    schedule, this one included (the bounds start only when enough remain to repay the start).
+
+    Shape:
+        ``weight`` ``(E, K, D)``, ``sigma`` ``(E,)``, ``grid_d2`` ``(K, K)``.
+
+    Raises:
+        ValueError: the epoch saw no sample (and there is no all-reduce to bring any).
+    """
+    dt = source.stats_dtype or weight.dtype
+    total, seen, skipped, i = None, 0, 0.0, 0
+    for part in source.parts:
+        sub = None
+        for chunk in part():
+            if chunk.shape[-2] == 0:
+                continue
+            stats, bounds = None, source.bounds[i] if source.bounds and i < len(source.bounds) else None
+            if bounds is not None and bounds.plan(chunk, weight, remaining):
+                stats = bounds.accumulate(chunk, weight)  # None: the kernel cannot serve
+                skipped += bounds.skipped * chunk.shape[-2] if stats is not None else 0.0
+            i += 1
+            stats = stats or accumulate(chunk, weight)
+            if bounds is not None:
+                bounds.counts = stats[1]
+            sub = _add(sub, *stats, dt)
+            seen += int(chunk.shape[-2])
+        if sub is not None:
+            total = _add(total, *sub, dt)
+    if total is None:
+        e, k, d = weight.shape
+        total = (torch.zeros(e, k, d, dtype=dt, device=weight.device),
+                 torch.zeros(e, k, dtype=dt, device=weight.device))
+    sums, counts = total
+    if source.all_reduce is not None:
+        source.all_reduce(sums)
+        source.all_reduce(counts)
+    elif seen == 0:
+        raise ValueError("the sources yielded no sample in this epoch")
+    target, den = batch_target(sums, counts, sigma.to(dt), grid_d2.to(dt), neighborhood)
+    _apply(weight, target, den, None)
+    return skipped / max(seen, 1)
 
 
 # ----------------------------------------------------------------------------- the engine
@@ -256,26 +358,35 @@ def _blocks(total: int, size: int, every: int | None) -> Iterator[tuple[int, int
         start = stop
 
 
-def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_size: int,
+def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int, batch_size: int,
         order: Order, sched: Schedules, grid_d2: torch.Tensor, neighborhood: NeighborhoodFn,
         progress: bool = True, callback: Callback | None = None, callback_every: int | None = None,
-        desc: str = "SOM", offset: int = 0, total: int | None = None) -> None:
+        desc: str = "SOM", offset: int = 0, total: int | None = None) -> list[float]:
     """Train ``weight`` in place for ``steps`` steps of the given mode (see the module docstring).
 
     ``offset`` / ``total``: the steps are steps ``offset … offset + steps − 1`` of a schedule of
     ``total`` steps (default: the schedule is these ``steps``), so that training in parts
     continues the decay instead of restarting it (:meth:`SOM.partial_fit`).
+
+    ``x``: the samples ``(N, D)`` or ``(E, N, D)``; in batch mode also a :class:`Chunks` source
+    (memory maps, partitions, an all-reduce): the batch map is one engine for all of them.
+
+    Returns the share of samples whose BMU search the bounds skipped, per step (batch mode; empty
+    for the other modes).
     """
     from tqdm.auto import tqdm
 
-    n = x.shape[-2]
+    if mode == "batch" and isinstance(x, torch.Tensor):
+        x = Chunks.of(x)
+    n = 1 if isinstance(x, Chunks) else x.shape[-2]  # batch mode: a step is an epoch
     planned = steps if total is None else total
     if offset < 0 or offset + steps > planned:
         raise ValueError(f"steps {offset}..{offset + steps} lie outside the schedule of {planned} steps")
-    per_step = {"online": 1, "batch": n, "minibatch": batch_size}[mode]
+    per_step = {"online": 1, "batch": 1, "minibatch": batch_size}[mode]
     every = callback_every
     block = BLOCK_STEPS if mode == "online" else 1
     cut_every = every if every else (n if mode == "online" else None)
+    skipped: list[float] = []
     bar = tqdm(total=steps, desc=desc, unit="step", disable=not progress, delay=0.5, leave=False)
     epochs_total = planned * per_step / n
     try:
@@ -286,7 +397,10 @@ def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_s
                     xs = _take(x, order.indices(offset + start, offset + stop))
                     online_block(weight, xs, lr, sigma, grid_d2, neighborhood)
                 elif mode == "batch":
-                    batch_step(weight, x, None, sigma[0], grid_d2, neighborhood)
+                    left = planned - offset - start  # epochs left in the schedule, this one included
+                    skipped.append(batch_epoch(weight, x, sigma[0], grid_d2, neighborhood, left))
+                    log.debug("batch epoch %d: BMU search skipped for %.1f %% of the samples", offset + stop,
+                              100 * skipped[-1])
                 else:
                     xs = _take(x, order.indices((offset + start) * batch_size, (offset + stop) * batch_size))
                     if xs.shape[0] == 1 and x.ndim == 2:
@@ -301,6 +415,8 @@ def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_s
                     fire = (stop * per_step) // n > (start * per_step) // n
                 if callback is not None and (fire or stop == steps):
                     callback(StepInfo(step=stop, total=steps, epoch=stop * per_step / n,
-                                      lr=lr[-1], sigma=sigma[-1], weight=weight))
+                                      lr=lr[-1], sigma=sigma[-1], weight=weight,
+                                      skipped=skipped[-1] if mode == "batch" else 0.0))
     finally:
         bar.close()
+    return skipped

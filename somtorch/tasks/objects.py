@@ -34,11 +34,9 @@ import numpy as np
 import torch
 
 from ..config import AreaConfig
+from ..config.options import LINKS, SELECTIONS, SPREADS
 from ..validation import check_tensor
 
-SELECTIONS = ("nearest", "salient", "all")
-LINKS = ("grid", "image", "both")
-SPREADS = ("range", "robust")
 
 
 @dataclass

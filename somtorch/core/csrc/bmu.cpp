@@ -380,12 +380,123 @@ int entry_online(T* w, const T* xs, int64_t xs_stride, const T* coef, const T* l
   return 0;
 }
 
+// Bounded batch-map statistics (Hamerly's exact k-means bounds, across epochs): for member e and
+// sample n with state c (its BMU), u >= distance to c and l <= distance to every other unit,
+// after the weights moved by drift (E, K) (max dmax (E,)):
+//     u += drift[e, c];  l -= dmax[e]           (both rounded outwards)
+//     if not u (1 + rho) + alpha < l (1 - rho): search again (top 2, the tile kernel above, so the
+//         BMU is bitwise the unbounded one), u = dist(c) (1 + grow), l = dist(c2) (1 - grow)
+//     sums[e, c] += x_n, counts[e, c] += 1       (sample order, as run_acc)
+// fresh != 0 searches every sample. searched[e] = how many samples member e searched. Threads take
+// whole members, so member e equals a solo map bitwise.
+template <typename T, int DC>
+void run_bounded(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t K, int64_t D,
+                 int64_t* c, double* u, double* l, const double* drift, const double* dmax, double rho,
+                 double alpha, double grow, int fresh, T* sums, int64_t* counts, int64_t* searched,
+                 int nthreads) {
+  typedef typename Lanes<T>::Idx Idx;
+  constexpr int TW = U * Lanes<T>::W;
+  const int64_t DD = DC > 0 ? DC : D;
+  nthreads = clamp_threads(nthreads, (double)E * (double)N * (double)K * (double)D, E);
+#pragma omp parallel num_threads(nthreads) if (nthreads > 1)
+  {
+    std::vector<T> xs_buf((size_t)D * TW);
+    std::vector<T> rows((size_t)D * TW);
+    std::vector<int64_t> redo;
+    alignas(32) Idx i1[TW];
+    alignas(32) Idx i2[TW];
+#pragma omp for schedule(dynamic, 1)
+    for (int64_t e = 0; e < E; ++e) {
+      const T* xe = x + e * x_stride;
+      const T* we = w + e * K * DD;
+      int64_t* ce = c + e * N;
+      double* ue = u + e * N;
+      double* le = l + e * N;
+      redo.clear();
+      if (fresh) {
+        redo.resize((size_t)N);
+        for (int64_t n = 0; n < N; ++n) redo[(size_t)n] = n;
+      } else {
+        const double* de = drift + e * K;
+        const double up = 1.0 + 2.0 * std::numeric_limits<double>::epsilon();
+        const double down = 1.0 - 2.0 * std::numeric_limits<double>::epsilon();
+        for (int64_t n = 0; n < N; ++n) {
+          const double un = (ue[n] + de[ce[n]]) * up;
+          const double ln = (le[n] - dmax[e]) * down;
+          ue[n] = un;
+          le[n] = ln;
+          if (!(un * (1.0 + rho) + alpha < ln * (1.0 - rho))) redo.push_back(n);
+        }
+      }
+      searched[e] = (int64_t)redo.size();
+      const int64_t R = (int64_t)redo.size();
+      for (int64_t r0 = 0; r0 < R; r0 += TW) {
+        const int64_t nv = R - r0 < TW ? R - r0 : TW;
+        for (int64_t j = 0; j < TW; ++j) {  // the rows of this tile, gathered
+          const T* row = xe + redo[(size_t)(r0 + (j < nv ? j : nv - 1))] * DD;
+          for (int64_t d = 0; d < DD; ++d) rows[(size_t)(j * DD + d)] = row[d];
+        }
+        load_tile<T, DC>(rows.data(), nv, D, xs_buf.data());
+        tile<T, DC, true>(xs_buf.data(), we, K, D, i1, i2);
+        for (int64_t j = 0; j < nv; ++j) {
+          const int64_t n = redo[(size_t)(r0 + j)];
+          const T* xn = xe + n * DD;
+          const T* w1 = we + (int64_t)i1[j] * DD;
+          const T* w2 = we + (int64_t)i2[j] * DD;
+          T s1 = 0, s2 = 0;
+          for (int64_t d = 0; d < DD; ++d) {
+            const T t1 = xn[d] - w1[d], t2 = xn[d] - w2[d];
+            s1 = s1 + t1 * t1;
+            s2 = s2 + t2 * t2;
+          }
+          ce[n] = i1[j];
+          ue[n] = std::sqrt((double)s1 * (1.0 + grow));
+          le[n] = std::sqrt((double)s2 * (1.0 - grow));
+        }
+      }
+      T* se = sums + e * K * DD;
+      int64_t* ke = counts + e * K;
+      for (int64_t n = 0; n < N; ++n) {
+        const int64_t k = ce[n];
+        const T* row = xe + n * DD;
+        T* sk = se + k * DD;
+        for (int64_t d = 0; d < DD; ++d) sk[d] += row[d];
+        ke[k] += 1;
+      }
+    }
+  }
+}
+
+template <typename T>
+int entry_bounded(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N, int64_t K, int64_t D,
+                  int64_t* c, double* u, double* l, const double* drift, const double* dmax, double rho,
+                  double alpha, double grow, int fresh, T* sums, int64_t* counts, int64_t* searched,
+                  int nthreads) {
+  if (E < 1 || N < 0 || K < 2 || D < 1) return 1;
+  if (K > (int64_t)std::numeric_limits<typename Lanes<T>::Idx>::max()) return 1;
+  if (has_nan(w, E * K * D)) return 2;
+  if (N == 0) return 0;
+  switch (D) {
+#define SOMTORCH_BOUNDED(DCV) \
+    run_bounded<T, DCV>(x, x_stride, w, E, N, K, D, c, u, l, drift, dmax, rho, alpha, grow, fresh, sums, \
+                        counts, searched, nthreads); \
+    break;
+    case 1: SOMTORCH_BOUNDED(1)
+    case 2: SOMTORCH_BOUNDED(2)
+    case 3: SOMTORCH_BOUNDED(3)
+    case 4: SOMTORCH_BOUNDED(4)
+    default: SOMTORCH_BOUNDED(0)
+#undef SOMTORCH_BOUNDED
+  }
+  return 0;
+}
+
 }  // namespace
 
 extern "C" {
 
 // Version of this C ABI; native.py refuses a library that reports another one.
-int somtorch_bmu_abi(void) { return 3; }
+int somtorch_bmu_abi(void) { return 4; }
 
 int somtorch_bmu_f32(const float* x, int64_t x_stride, const float* w, int64_t E, int64_t N,
                      int64_t K, int64_t D, int top, int64_t* out, int nthreads) {
@@ -418,6 +529,22 @@ int somtorch_online_f64(double* w, const double* xs, int64_t xs_stride, const do
                         const double* log_lr, const double* g, int64_t E, int64_t S, int64_t K,
                         int64_t D, int nthreads) {
   return entry_online<double>(w, xs, xs_stride, coef, log_lr, g, E, S, K, D, nthreads);
+}
+
+int somtorch_bounded_f32(const float* x, int64_t x_stride, const float* w, int64_t E, int64_t N, int64_t K,
+                         int64_t D, int64_t* c, double* u, double* l, const double* drift, const double* dmax,
+                         double rho, double alpha, double grow, int fresh, float* sums, int64_t* counts,
+                         int64_t* searched, int nthreads) {
+  return entry_bounded<float>(x, x_stride, w, E, N, K, D, c, u, l, drift, dmax, rho, alpha, grow, fresh, sums,
+                              counts, searched, nthreads);
+}
+
+int somtorch_bounded_f64(const double* x, int64_t x_stride, const double* w, int64_t E, int64_t N,
+                         int64_t K, int64_t D, int64_t* c, double* u, double* l, const double* drift,
+                         const double* dmax, double rho, double alpha, double grow, int fresh, double* sums,
+                         int64_t* counts, int64_t* searched, int nthreads) {
+  return entry_bounded<double>(x, x_stride, w, E, N, K, D, c, u, l, drift, dmax, rho, alpha, grow, fresh,
+                               sums, counts, searched, nthreads);
 }
 
 }  // extern "C"
