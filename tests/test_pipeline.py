@@ -339,7 +339,7 @@ def test_many_calls_warn_once_about_kept_everything(caplog):
     import logging
 
     from somtorch.config import with_overrides
-    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity import load_scene
     from somtorch.pipeline import PipelineConfig, fallback_summary, run_pipeline
 
     from pathlib import Path

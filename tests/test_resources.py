@@ -34,7 +34,7 @@ _PEAK = textwrap.dedent("""
         est = estimate(height=1, width=2000, valid=2000, train=2000, units=1024, members=100, epochs=2)
     else:
         from somtorch.config import with_overrides
-        from somtorch.disparity.scene import load_scene
+        from somtorch.disparity import load_scene
         from somtorch.pipeline import PipelineConfig, resource_estimate, run_pipeline
         scene = load_scene("motorcycle")
         cfg = with_overrides(PipelineConfig(), json.loads(case))
