@@ -281,6 +281,39 @@ def test_online_rule_equals_the_torch_formulation(kernel, k, d, member, dtype, t
     assert torch.equal(solo[0], w[1])
 
 
+@pytest.mark.parametrize("dtype,tol", [(torch.float32, 2e-6), (torch.float64, 1e-14)], ids=["f32", "f64"])
+@pytest.mark.parametrize("e", [2, 5, 11, 19])
+@pytest.mark.parametrize("data", ["shared", "member"])
+def test_online_lanes_equal_solo_runs_bitwise(kernel, dtype, tol, e, data):
+    """Members in vector lanes (E >= 2; 8 float32 / 4 float64 per vector, partly filled last block):
+    every member equals its solo run (E = 1, one member at a time) bit for bit, with steps where the
+    members share α and σ (one exponential table) and steps where each member has its own, an index
+    stream per member into shared or per-member data, and ties in the distances (grid-valued data)."""
+    g = torch.Generator().manual_seed(e)
+    k, d, s, n = 12, 3, 300, 40
+    x = torch.randint(0, 4, (e, n, d) if data == "member" else (n, d), generator=g).to(dtype) / 3
+    idx = torch.randint(0, n, (e, s), generator=g)
+    w0 = torch.randint(0, 4, (e, k, d), generator=g).to(dtype) / 3  # the first steps have exact ties
+    sigma = torch.linspace(2.0, 0.5, s, dtype=dtype)[:, None].repeat(1, e)
+    lr = torch.linspace(0.5, 0.01, s, dtype=dtype)[:, None].repeat(1, e)
+    sigma[s // 3: 2 * s // 3] *= torch.linspace(0.8, 1.2, e, dtype=dtype)  # a stretch of per-member radii
+    coef, log_lr = -0.5 / sigma ** 2, torch.log(lr)
+    rows, cols = torch.meshgrid(torch.arange(3), torch.arange(4), indexing="ij")
+    pos = torch.stack([rows.reshape(-1), cols.reshape(-1)], 1).to(dtype)
+    grid_d2 = ((pos[:, None] - pos[None]) ** 2).sum(-1)
+    w = w0.clone()
+    assert native.native_online(w, x, coef, log_lr, grid_d2, idx)
+    for m in range(e):
+        solo = w0[m:m + 1].clone()
+        xm = x[m:m + 1] if data == "member" else x
+        assert native.native_online(solo, xm, coef[:, m:m + 1].contiguous(), log_lr[:, m:m + 1].contiguous(),
+                                    grid_d2, idx[m:m + 1])
+        assert torch.equal(solo[0], w[m]), (m, (solo[0] - w[m]).abs().max())
+    xs = torch.stack([(x[m] if data == "member" else x)[idx[m]] for m in range(e)])  # (E, S, D)
+    ref = _online_torch(w0, xs, coef, log_lr, grid_d2)
+    assert torch.allclose(w, ref, rtol=0, atol=tol), (w - ref).abs().max()
+
+
 def test_online_rule_refuses_nan_weights_and_foreign_dtypes(kernel):
     w = torch.rand(1, 4, 3)
     w[0, 2, 1] = float("nan")
