@@ -17,6 +17,7 @@ seed would.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import torch
@@ -25,6 +26,7 @@ from .decay import DecayFn, schedule
 from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search
 from .native import native_accumulate, native_online
 from .neighborhood import NeighborhoodFn, gaussian
+from .threads import kernel_threads
 
 BLOCK_STEPS = 4096  # steps whose samples and schedule values are prepared at once (online rule)
 
@@ -112,14 +114,39 @@ class Order:
                 # int32 where N allows: the same permutations as int64 (torch's Fisher–Yates does not
                 # depend on the dtype), half the memory traffic, each drawn into its row (no stack)
                 dtype = torch.int32 if self.n < 2 ** 31 else torch.long
-                self._perm = torch.empty(len(self.generators), self.n, dtype=dtype, device=self.device)
-                for g, row in zip(self.generators, self._perm):
-                    torch.randperm(self.n, generator=g, out=row)  # (N,) of the (E, N) table
+                self._perm = _permutations(self.generators, self.n, dtype, self.device)  # (E, N)
                 self._epoch = epoch
             take = min(stop - pos, self.n - off)
             parts.append(self._perm[:, off:off + take])
             pos += take
         return torch.cat(parts, dim=1).long()
+
+
+PERM_THREAD_ELEMENTS = 1 << 20  # E·N from which the members' permutations are drawn on several threads
+
+
+def _permutations(generators: list[torch.Generator], n: int, dtype: torch.dtype,
+                  device: torch.device) -> torch.Tensor:
+    """One ``randperm(n)`` per generator, each drawn into its row of an ``(E, n)`` table.
+
+    On the CPU, large tables are drawn by ``kernel_threads()`` Python threads (torch releases the
+    GIL inside ``randperm``); each row still comes from its own generator alone, so the table is
+    the same whatever the thread count.
+    """
+    out = torch.empty(len(generators), n, dtype=dtype, device=device)
+    jobs = list(zip(generators, out))
+
+    def draw(job: tuple[torch.Generator, torch.Tensor]) -> None:
+        torch.randperm(n, generator=job[0], out=job[1])
+
+    workers = min(kernel_threads(), len(jobs)) if device.type == "cpu" and out.numel() >= PERM_THREAD_ELEMENTS else 1
+    if workers > 1:
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(draw, jobs))
+    else:
+        for job in jobs:
+            draw(job)
+    return out
 
 
 def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
