@@ -48,6 +48,7 @@ logger = logging.getLogger(__name__)
 
 ENV_SWITCH = "SOMTORCH_NATIVE"  # "0" disables the native kernel
 ENV_CACHE = "SOMTORCH_CACHE_DIR"
+ENV_WIDE = "SOMTORCH_NATIVE_AVX512"  # "0": AVX2 vectors even where the CPU has AVX-512
 SOURCE = Path(__file__).resolve().parent / "csrc" / "bmu.cpp"
 ABI = 4  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
 BASE_FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off")
@@ -119,7 +120,10 @@ def _build() -> Path:
         version = subprocess.run([cxx, "--version"], capture_output=True, text=True, timeout=60).stdout
     except (OSError, subprocess.SubprocessError) as exc:
         raise RuntimeError(f"cannot run the C++ compiler {cxx}: {exc}") from exc
-    isa = ["-mavx2", "-mfma"] if {"avx2", "fma"} <= _cpu_flags() else []
+    flags = _cpu_flags()
+    isa = ["-mavx2", "-mfma"] if {"avx2", "fma"} <= flags else []
+    if isa and "avx512f" in flags and os.environ.get(ENV_WIDE, "1").strip() != "0":
+        isa.append("-mavx512f")  # 16 float32 lanes for the search kernels (csrc/bmu.cpp kSearchBytes)
     variants = [[*BASE_FLAGS, *isa, "-fopenmp"], [*BASE_FLAGS, *isa]]  # without OpenMP: one thread
     src = SOURCE.read_bytes()
     folder = cache_dir()

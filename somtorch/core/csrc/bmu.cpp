@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 #ifdef _OPENMP
@@ -35,18 +36,19 @@ typedef int32_t i32x8 __attribute__((vector_size(32)));
 typedef double f64x4 __attribute__((vector_size(32)));
 typedef int64_t i64x4 __attribute__((vector_size(32)));
 
-template <typename T> struct Lanes;
-template <> struct Lanes<float> {
-  typedef f32x8 V;
-  typedef i32x8 I;
-  typedef int32_t Idx;
-  static constexpr int W = 8;
-};
-template <> struct Lanes<double> {
-  typedef f64x4 V;
-  typedef i64x4 I;
-  typedef int64_t Idx;
-  static constexpr int W = 4;
+#if defined(__AVX512F__)
+constexpr int kSearchBytes = 64;  // vector width of the search kernels: 16 float32 / 8 float64 lanes
+#else
+constexpr int kSearchBytes = 32;  // AVX2 (or SSE, split by the compiler): 8 float32 / 4 float64 lanes
+#endif
+
+// Vector types of a kernel: W lanes of T, and the lane indices (int32 for float, int64 for double).
+template <typename T, int Bytes = kSearchBytes>
+struct Lanes {
+  typedef T V __attribute__((vector_size(Bytes)));
+  typedef typename std::conditional<sizeof(T) == 4, int32_t, int64_t>::type Idx;
+  typedef Idx I __attribute__((vector_size(Bytes)));
+  static constexpr int W = Bytes / (int)sizeof(T);
 };
 
 constexpr int U = 2;  // vectors per tile (independent dependency chains)
@@ -377,9 +379,9 @@ constexpr int64_t kAhead = 4;          // steps ahead whose samples are prefetch
 
 // h[j][l] = rows[l][j] for j < W: W consecutive entries of W rows (one per lane) turned into W vectors.
 template <typename T>
-inline void transpose_rows(const T* const* rows, typename Lanes<T>::V* h) {
-  for (int j = 0; j < Lanes<T>::W; ++j)
-    for (int l = 0; l < Lanes<T>::W; ++l) h[j][l] = rows[l][j];
+inline void transpose_rows(const T* const* rows, typename Lanes<T, 32>::V* h) {
+  for (int j = 0; j < Lanes<T, 32>::W; ++j)
+    for (int l = 0; l < Lanes<T, 32>::W; ++l) h[j][l] = rows[l][j];
 }
 #ifdef __AVX__
 template <>
@@ -477,12 +479,12 @@ struct LaneStep {
 
 // Step s of U consecutive blocks (wk: their (K, D) vectors, mem: the member of each lane).
 template <typename T, int DC, int U>
-inline void lane_step(const LaneStep<T>& st, int64_t s, bool shared, T a0, T c0, typename Lanes<T>::V* wk,
+inline void lane_step(const LaneStep<T>& st, int64_t s, bool shared, T a0, T c0, typename Lanes<T, 32>::V* wk,
                       const int64_t* mem) {
-  typedef typename Lanes<T>::V V;
-  typedef typename Lanes<T>::I I;
-  typedef typename Lanes<T>::Idx Idx;
-  constexpr int W = Lanes<T>::W;
+  typedef typename Lanes<T, 32>::V V;
+  typedef typename Lanes<T, 32>::I I;
+  typedef typename Lanes<T, 32>::Idx Idx;
+  constexpr int W = Lanes<T, 32>::W;
   const int64_t K = st.K, DD = DC > 0 ? DC : st.D;
   V xloc[U][DC > 0 ? DC : 1];
   std::vector<V> xheap(DC > 0 ? 0 : (size_t)(U * DD));
@@ -585,10 +587,10 @@ template <typename T, int DC>
 void run_online_lanes(T* w, const T* data, int64_t x_stride, const int64_t* idx, int64_t idx_stride,
                       const T* coef, const T* log_lr, const T* g, int64_t E, int64_t S, int64_t K,
                       int64_t D, int nthreads) {
-  typedef typename Lanes<T>::V V;
-  typedef typename Lanes<T>::I I;
-  typedef typename Lanes<T>::Idx Idx;
-  constexpr int W = Lanes<T>::W;
+  typedef typename Lanes<T, 32>::V V;
+  typedef typename Lanes<T, 32>::I I;
+  typedef typename Lanes<T, 32>::Idx Idx;
+  constexpr int W = Lanes<T, 32>::W;
   const int64_t DD = DC > 0 ? DC : D;
   const int64_t B = (E + W - 1) / W;
   const bool table = K <= kTableMaxK;
@@ -653,7 +655,7 @@ template <typename T>
 int entry_online(T* w, const T* x, int64_t xs, const int64_t* idx, int64_t is, const T* coef,
                  const T* log_lr, const T* g, int64_t E, int64_t S, int64_t K, int64_t D, int nt) {
   if (E < 1 || S < 0 || K < 1 || D < 1) return 1;
-  if (K > (int64_t)std::numeric_limits<typename Lanes<T>::Idx>::max()) return 1;
+  if (K > (int64_t)std::numeric_limits<typename Lanes<T, 32>::Idx>::max()) return 1;
   if (has_nan(w, E * K * D)) return 2;
   if (S == 0) return 0;
   switch (D) {
