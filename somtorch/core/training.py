@@ -244,7 +244,11 @@ def batch_target(sums: torch.Tensor, counts: torch.Tensor, sigma: torch.Tensor, 
         ``sums`` ``(E, K, D)``, ``counts`` ``(E, K)``, ``sigma`` ``(E,)`` → target ``(E, K, D)`` and
         the denominator ``(E, K)`` (0 where no sample reaches the unit).
     """
-    h = neighborhood(grid_d2.unsqueeze(0), sigma.view(-1, 1, 1))  # (E, K, K), symmetric
+    e = sigma.shape[0]
+    if e > 1 and bool((sigma == sigma[0]).all()):  # one radius for the ensemble: one (K, K) table
+        h = neighborhood(grid_d2.unsqueeze(0), sigma[:1].view(1, 1, 1)).expand(e, -1, -1)  # (E, K, K)
+    else:
+        h = neighborhood(grid_d2.unsqueeze(0), sigma.view(-1, 1, 1))  # (E, K, K), symmetric
     # one batched matrix product for numerators and denominators (the counts ride along as an
     # extra column): no (E, K, K, D) intermediate, so a 16 x 16 ensemble costs what its members
     # do; every member is its own product of the batch, so member e equals the solo map bitwise
