@@ -455,6 +455,17 @@ def row_online(st: Settings, x_or: torch.Tensor, w0: torch.Tensor, peers: dict[s
     return row
 
 
+def vs_minisom(row: Row, member_steps_per_s: float, online: Row, target: float) -> Row:
+    """Judge an ensemble row by its member-steps/s against MiniSom's steps/s of the online row."""
+    if "minisom_steps_per_s" in online.extra:
+        ms_thr = online.extra["minisom_steps_per_s"]
+        row.peer = f"MiniSom steps/s from the online row ({ms_thr:,.0f}/s)"
+        row.peer_timing = online.peer_timing
+        row.ratio = member_steps_per_s / ms_thr
+        row.ok = row.ratio >= target
+    return row
+
+
 def row_ensemble_online(st: Settings, x_or: torch.Tensor, w0: torch.Tensor, online: Row) -> Row:
     n = x_or.shape[0]
     steps = st.ensemble_online_epochs * n
@@ -474,13 +485,7 @@ def row_ensemble_online(st: Settings, x_or: torch.Tensor, w0: torch.Tensor, onli
               ratio_label="member-steps/s / MiniSom steps/s",
               extra={"member_steps_per_s": thr, "solo_steps_per_s": online.extra["ours_steps_per_s"],
                      "vs_solo_somtorch": thr / online.extra["ours_steps_per_s"]})
-    if "minisom_steps_per_s" in online.extra:
-        ms_thr = online.extra["minisom_steps_per_s"]
-        row.peer = f"MiniSom steps/s from the online row ({ms_thr:,.0f}/s)"
-        row.peer_timing = online.peer_timing
-        row.ratio = thr / ms_thr
-        row.ok = row.ratio >= 20.0
-    return row
+    return vs_minisom(row, thr, online, 20.0)
 
 
 def cpu_mhz() -> float | None:
@@ -535,13 +540,7 @@ def row_ensemble_online_paper(st: Settings, online: Row) -> Row:
               f"{e} members x 1 epoch x {n:,} px ({st.paper_width}x{st.paper_height}) = {e * n:,} member-steps",
               ours, target=TARGETS["ensemble_online_paper"], ratio_label="member-steps/s / MiniSom steps/s",
               extra=extra)
-    if "minisom_steps_per_s" in online.extra:
-        ms_thr = online.extra["minisom_steps_per_s"]
-        row.peer = f"MiniSom steps/s from the online row ({ms_thr:,.0f}/s)"
-        row.peer_timing = online.peer_timing
-        row.ratio = thr / ms_thr
-        row.ok = row.ratio >= 450.0
-    return row
+    return vs_minisom(row, thr, online, 450.0)
 
 
 def row_ensemble_batch(st: Settings, x_or: torch.Tensor, w0: torch.Tensor) -> Row:
