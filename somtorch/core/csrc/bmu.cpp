@@ -442,7 +442,7 @@ template <typename T>
 inline bool same_bits(T a, T b) { return std::memcmp(&a, &b, sizeof(T)) == 0; }
 
 // The distinct values of g (K*K entries, compared by bit pattern): vals, and vidx[i] with
-// vals[vidx[i]] == g[i] bitwise. A grid has few (21 for 4 x 7, 70 for 16 x 16), so when every member
+// vals[vidx[i]] == g[i] bitwise. A grid has few (21 for 4 x 7, 120 for 16 x 16), so when every member
 // of a step has the same log_lr and coef, one exp per distinct value serves them all and each h_k is
 // exp(a + vals[v] * b) with the very operands of exp(a + g[c, k] * b): the same bits as run_online.
 template <typename T>
