@@ -111,9 +111,9 @@ class Order:
         while pos < stop:
             epoch, off = divmod(pos, self.n)
             if epoch != self._epoch:
-                # int32 where N allows: the same permutations as int64 (torch's Fisher–Yates does not
-                # depend on the dtype), half the memory traffic, each drawn into its row (no stack)
-                dtype = torch.int32 if self.n < 2 ** 31 else torch.long
+                # int32 on the CPU where N allows: the same permutations as int64 (torch's CPU
+                # Fisher–Yates does not depend on the dtype), half the memory traffic
+                dtype = torch.int32 if self.device.type == "cpu" and self.n < 2 ** 31 else torch.long
                 self._perm = _permutations(self.generators, self.n, dtype, self.device)  # (E, N)
                 self._epoch = epoch
             take = min(stop - pos, self.n - off)
