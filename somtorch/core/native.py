@@ -14,7 +14,9 @@ with :mod:`ctypes`. It is compiled on the first call with the system C++ compile
 ``c++``) into ``$SOMTORCH_CACHE_DIR`` (default ``$XDG_CACHE_HOME/somtorch/native`` or
 ``~/.cache/somtorch/native``) under a name that hashes the source, the compiler and the flags; an
 ``fcntl`` file lock keeps concurrent processes (pytest-xdist workers) from compiling twice, and the
-library is moved into place atomically. ``-mavx2 -mfma`` are used only when the CPU reports both.
+library is moved into place atomically. ``-mavx2 -mfma`` are used only when the CPU reports both,
+``-mavx512f`` (16 float32 lanes in the search kernels) when it also reports AVX-512 and
+``SOMTORCH_NATIVE_AVX512`` is not ``0``.
 
 ``native_bmu`` returns ``None`` whenever the kernel cannot serve the call — ``SOMTORCH_NATIVE=0``,
 no compiler or a failed build (logged once as a warning), non-CPU tensors, dtypes other than
