@@ -497,6 +497,8 @@ struct LaneStep {
   T* hl;           // (U, W, KP) per-lane rows when the members' schedules differ
   int64_t* row_at;  // step at which H row c / tv[v] was last filled
   int64_t* val_at;
+  typename Lanes<T, 32>::V* xv_any;  // runtime D: scratch for U * D sample vectors
+  T* xt_any;                          // runtime D: scratch for D * W scalars
 };
 
 // Step s of U consecutive blocks (wk: their (K, D) vectors, mem: the member of each lane).
@@ -509,14 +511,11 @@ inline void lane_step(const LaneStep<T>& st, int64_t s, bool shared, T a0, T c0,
   constexpr int W = Lanes<T, 32>::W;
   const int64_t K = st.K, DD = DC > 0 ? DC : st.D;
   V xloc[U][DC > 0 ? DC : 1];
-  std::vector<V> xheap(DC > 0 ? 0 : (size_t)(U * DD));
   V* xv[U];
   for (int u = 0; u < U; ++u) {
-    xv[u] = DC > 0 ? xloc[u] : xheap.data() + u * DD;
+    xv[u] = DC > 0 ? xloc[u] : st.xv_any + u * DD;
     alignas(64) T xt[DC > 0 ? DC : 1][W];
-    T* xtp = DC > 0 ? &xt[0][0] : nullptr;
-    std::vector<T> xth(DC > 0 ? 0 : (size_t)(DD * W));
-    if (DC == 0) xtp = xth.data();
+    T* xtp = DC > 0 ? &xt[0][0] : st.xt_any;
     for (int l = 0; l < W; ++l) {
       const int64_t e = mem[u * W + l];
       const int64_t* il = st.idx + e * st.idx_stride;
@@ -642,6 +641,8 @@ void run_online_lanes(T* w, const T* data, int64_t x_stride, const int64_t* idx,
     const int64_t KP = (K + W - 1) / W * W;
     std::vector<T> H(table && nb > 0 ? (size_t)(K * KP) : 0), tv((size_t)NV), hl((size_t)(2 * W * KP));
     std::vector<int64_t> row_at(table ? (size_t)K : 0, -1), val_at((size_t)NV, -1);
+    std::vector<V> xv_any((size_t)(2 * DD));
+    std::vector<T> xt_any((size_t)(DD * W));
     for (int64_t s = 0; s < S && nb > 0; ++s) {
       const T* lr_s = log_lr + s * E;
       const T* cf_s = coef + s * E;
@@ -650,7 +651,8 @@ void run_online_lanes(T* w, const T* data, int64_t x_stride, const int64_t* idx,
         shared = same_bits(lr_s[e], lr_s[e_lo]) && same_bits(cf_s[e], cf_s[e_lo]);
       const T a0 = lr_s[e_lo], c0 = cf_s[e_lo];
       LaneStep<T> st{data, x_stride, idx, idx_stride, g, lr_s, cf_s, S, K, D, vidx.data(), vals.data(),
-                     KP, H.data(), tv.data(), hl.data(), row_at.data(), val_at.data()};
+                     KP, H.data(), tv.data(), hl.data(), row_at.data(), val_at.data(), xv_any.data(),
+                     xt_any.data()};
       int64_t j = 0;
       for (; j + 2 <= nb; j += 2)  // two blocks at a time: two independent argmin chains interleaved
         lane_step<T, DC, 2>(st, s, shared, a0, c0, wb + j * K * DD, mem.data() + j * W);
