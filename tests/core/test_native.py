@@ -285,7 +285,8 @@ def test_online_rule_equals_the_torch_formulation(kernel, k, d, member, dtype, t
 @pytest.mark.parametrize("dtype,tol", [(torch.float32, 2e-6), (torch.float64, 1e-14)], ids=["f32", "f64"])
 @pytest.mark.parametrize("e", [2, 5, 11, 19])
 @pytest.mark.parametrize("data", ["shared", "member"])
-def test_online_lanes_equal_solo_runs_bitwise(kernel, dtype, tol, e, data):
+@pytest.mark.parametrize("grid", ["grid", "arbitrary"])
+def test_online_lanes_equal_solo_runs_bitwise(kernel, dtype, tol, e, data, grid):
     """Members in vector lanes (E >= 2; 8 float32 / 4 float64 per vector, partly filled last block):
     every member equals its solo run (E = 1, one member at a time) bit for bit, with steps where the
     members share α and σ (one exponential table) and steps where each member has its own, an index
@@ -302,6 +303,9 @@ def test_online_lanes_equal_solo_runs_bitwise(kernel, dtype, tol, e, data):
     rows, cols = torch.meshgrid(torch.arange(3), torch.arange(4), indexing="ij")
     pos = torch.stack([rows.reshape(-1), cols.reshape(-1)], 1).to(dtype)
     grid_d2 = ((pos[:, None] - pos[None]) ** 2).sum(-1)
+    if grid == "arbitrary":  # 66 distinct values > 4 K: the kernel fills only the exps its rows need
+        grid_d2 = torch.rand(k, k, generator=g, dtype=dtype) * 9
+        grid_d2 = (grid_d2 + grid_d2.T).fill_diagonal_(0)
     w = w0.clone()
     assert native.native_online(w, x, coef, log_lr, grid_d2, idx)
     for m in range(e):

@@ -497,6 +497,7 @@ struct LaneStep {
   T* hl;           // (U, W, KP) per-lane rows when the members' schedules differ
   int64_t* row_at;  // step at which H row c / tv[v] was last filled
   int64_t* val_at;
+  bool eager;                         // tv holds every distinct value's exp for this step
   typename Lanes<T, 32>::V* xv_any;  // runtime D: scratch for U * D sample vectors
   T* xt_any;                          // runtime D: scratch for D * W scalars
 };
@@ -557,6 +558,10 @@ inline void lane_step(const LaneStep<T>& st, int64_t s, bool shared, T a0, T c0,
         st.row_at[cl] = s;
         const int32_t* vr = st.vidx + cl * K;
         T* hr = st.H + cl * st.KP;
+        if (st.eager) {  // every tv[v] of this step is ready
+          for (int64_t k = 0; k < K; ++k) hr[k] = st.tv[vr[k]];
+          continue;
+        }
         for (int64_t k = 0; k < K; ++k) {
           const int32_t v = vr[k];
           if (st.val_at[v] != s) {
@@ -650,8 +655,13 @@ void run_online_lanes(T* w, const T* data, int64_t x_stride, const int64_t* idx,
       for (int64_t e = e_lo + 1; shared && e < e_hi; ++e)
         shared = same_bits(lr_s[e], lr_s[e_lo]) && same_bits(cf_s[e], cf_s[e_lo]);
       const T a0 = lr_s[e_lo], c0 = cf_s[e_lo];
+      // few distinct distances (a grid: 21 for 4 x 7, 120 for 16 x 16): all their exps at once, then
+      // the rows are plain lookups; otherwise (an arbitrary g) only the values the rows need
+      const bool eager = shared && NV <= 4 * K;
+      if (eager)
+        for (int64_t v = 0; v < NV; ++v) tv[(size_t)v] = std::exp(a0 + vals[(size_t)v] * c0);
       LaneStep<T> st{data, x_stride, idx, idx_stride, g, lr_s, cf_s, S, K, D, vidx.data(), vals.data(),
-                     KP, H.data(), tv.data(), hl.data(), row_at.data(), val_at.data(), xv_any.data(),
+                     KP, H.data(), tv.data(), hl.data(), row_at.data(), val_at.data(), eager, xv_any.data(),
                      xt_any.data()};
       int64_t j = 0;
       for (; j + 2 <= nb; j += 2)  // two blocks at a time: two independent argmin chains interleaved
