@@ -50,8 +50,15 @@ UPSTREAM = ("features", "ground", "som", "train", "baseline", "method", "ensembl
 
 @dataclass
 class ValidateConfig(RunConfig):
-    """The pipeline config plus the scenes (None = all of ``conf/scene_lists/dev.yaml``) and the grid
-    (``"group.field"`` → values tried instead of the default)."""
+    """The pipeline config plus the scenes and the grid of values tried.
+
+    Attributes:
+        scenes: the development scenes scored (None = every development scene).
+        grid: ``{"group.field": [values]}`` tried instead of each default, one constant at a time.
+        gallery: a folder: one picture of member 0 per scene (defaults); None = no pictures.
+        min_gain: a value replaces the default only if it gains more than min_gain x the runs.
+        transforms: robustness checks: every scene transformed (``flip``, ``resample:F``, ``pole``, ``border``, ``specks``; experiments.scenes.add_junk) and scored with the defaults.
+    """
 
     scenes: Optional[list[str]] = None
     grid: dict[str, list[Any]] = field(default_factory=dict)

@@ -45,7 +45,15 @@ log = logging.getLogger("somtorch.video")
 @dataclass
 class SequenceConfig(WarmStartConfig):
     """Which frames (``glob`` of disparity files, or a pan over ``data``) plus the warm start of
-    :class:`somtorch.config.WarmStartConfig`."""
+    :class:`somtorch.config.WarmStartConfig`.
+
+    Attributes:
+        glob: disparity files read as frames, in name order (None = a pan over ``data``).
+        frames: at most this many frames.
+        width: width in px of the pan's window.
+        height: height in px of the pan's window.
+        step_px: the pan's shift per frame in px.
+    """
 
     glob: Optional[str] = None
     frames: int = 60
