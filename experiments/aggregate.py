@@ -216,7 +216,9 @@ def aggregate(folders: list[Path], out: Path) -> dict[str, Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m experiments.aggregate", description=__doc__.split("\n\n")[0])
+    from .help import prog
+
+    p = argparse.ArgumentParser(prog=prog("aggregate"), description=__doc__.split("\n\n")[0])
     p.add_argument("folders", nargs="+", type=Path, help="sweep / run folders holding metrics.json files")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: the first folder)")
     args = p.parse_args(argv)

@@ -253,6 +253,17 @@ def test_aggregate_without_metrics_is_a_clear_error(tmp_path):
         aggregate([tmp_path / "missing"], tmp_path)
 
 
+@pytest.mark.parametrize("argv0, usage", [("/u/.venv/bin/somtorch-aggregate", "usage: somtorch-aggregate "),
+                                           ("/repo/experiments/aggregate.py", "usage: python -m experiments.aggregate ")])
+def test_aggregate_usage_names_the_command_typed(argv0, usage, monkeypatch, capsys):
+    from experiments.aggregate import main
+
+    monkeypatch.setattr(sys, "argv", [argv0])
+    with pytest.raises(SystemExit):
+        main([])
+    assert capsys.readouterr().err.startswith(usage)
+
+
 def test_a_terminated_job_leaves_no_staging_folder_and_reruns(tmp_path):
     cmd = [sys.executable, "-m", "experiments.study", f"paths.output_dir={tmp_path}", "study=term", "data=motorcycle",
            "ensemble=40", "execution=separate", "output.maps=false", "output.tensorboard=false"]
