@@ -12,7 +12,7 @@ import re
 import sys
 from pathlib import Path
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+from . import CONF  # the clone's conf/, or the one shipped in the wheel
 
 USAGE = {
     "run": "the whole pipeline on one scene (outputs/run/<scene>/<time>/)",
@@ -180,5 +180,10 @@ def maybe_print_help(name: str, argv: list[str] | None = None) -> None:
     """Print the help and exit 0 when ``-h`` / ``--help`` is among the arguments."""
     args = sys.argv[1:] if argv is None else argv
     if "--help" in args or "-h" in args:
-        print(help_text(name, sys.argv[0] if argv is None else None))
+        try:
+            print(help_text(name, sys.argv[0] if argv is None else None), flush=True)
+        except BrokenPipeError:  # `--help | head`: the reader has seen enough
+            import os
+
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         raise SystemExit(0)

@@ -10,9 +10,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
 
-SCENE_LISTS = Path(__file__).resolve().parents[1] / "conf" / "scene_lists"
+from . import CONF
+
+SCENE_LISTS = CONF / "scene_lists"
 SCENES_FILE = SCENE_LISTS / "dev.yaml"
-LABELS = Path(__file__).resolve().parents[1] / "conf" / "labels"
+LABELS = CONF / "labels"
 
 
 @dataclass

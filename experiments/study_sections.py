@@ -10,7 +10,7 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-from experiments.metrics_schema import config_hash
+from .metrics_schema import config_hash
 
 STAGES = ("clean", "ground", "features", "train", "segment", "objects", "reduction")
 

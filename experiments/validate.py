@@ -25,7 +25,7 @@ and ``validate.md`` into the Hydra run folder.
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from experiments.help import maybe_print_help
+    from .help import maybe_print_help
 
     maybe_print_help("validate")
 
@@ -41,9 +41,10 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.schema import RunConfig, register
+from . import CONF
+from .schema import RunConfig, register
 
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = str(CONF)
 log = logging.getLogger("somtorch.validate")
 UPSTREAM = ("features", "ground", "som", "train", "baseline", "method", "ensemble", "seed")
 
@@ -218,7 +219,7 @@ def _default_of(cfg: Any, key: str) -> Any:
 
 def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     """Run the protocol of the module docstring; returns the JSON-ready report."""
-    from experiments.scenes import check_junk_kind, dev_scenes, load_dev_scene
+    from .scenes import check_junk_kind, dev_scenes, load_dev_scene
 
     for kind in cfg.transforms:  # before any work: a typo must not cost the whole protocol
         check_junk_kind(kind)
@@ -265,7 +266,7 @@ def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]
     by scene name. A transform is a check of the rule (a mirrored or resampled scene is as easy
     as the original; a pole in front of the object is a failure class), not a tuning scene: the
     folds never see it. Scenes already resampled are skipped by a resampling transform."""
-    from experiments.scenes import add_junk
+    from .scenes import add_junk
 
     out = {}
     for c in caches:
@@ -340,10 +341,10 @@ ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="validate")
 def main(dcfg: DictConfig) -> int:
-    from experiments.cli import configure_threads
+    from .cli import configure_threads
 
     configure_threads()
-    from experiments.schema import one_line_errors
+    from .schema import one_line_errors
     from somtorch.atomic import write_staged
 
     with one_line_errors(log):
@@ -360,7 +361,7 @@ def main(dcfg: DictConfig) -> int:
 register()
 def cli() -> None:
     """Console entry: the overrides are checked against the schema first ("did you mean")."""
-    from experiments.cli import run_checked
+    from .cli import run_checked
 
     run_checked(main, ValidateConfig)
 
