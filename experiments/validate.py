@@ -142,6 +142,8 @@ class SceneCache:
         import matplotlib.pyplot as plt
         import numpy as np
 
+        from somtorch.viz import identified_percent
+
         if not 0 <= member < self.base.ensemble:
             raise ValueError(f"gallery member {member} must be in [0, ensemble={self.base.ensemble})")
         ground, members = self.members(overrides or {})
@@ -164,7 +166,7 @@ class SceneCache:
             ax.text(x0 + 3, y0 + 12, f"{a.confidence:.2f}" if a.confidence is not None else "", color="red",
                     fontsize=9, weight="bold")
         s = m.score
-        verdict = (f"identified {s.identified_fraction:.0%}, reduction {s.reduction_union:.1f} % "
+        verdict = (f"identified {identified_percent(s.identified_fraction)}, reduction {s.reduction_union:.1f} % "
                    f"(x_opt {s.x_opt:.1f} %): {'useful' if s.useful_hit else 'not useful'}"
                    + (", no object (whole map kept)" if m.no_object else ""))
         ax.set_title(f"{self.spec.name} (seed {m.seed}) — {verdict}\nred: kept boxes (confidence); "
