@@ -39,13 +39,13 @@ def main(argv: list[str] | None = None) -> int:
     cfg = with_overrides(PipelineConfig(), {"ensemble": runs})
     if data.is_dir():
         sys.path.insert(0, str(common.REPO_ROOT))
-        from experiments.scenes import dev_scenes, load_dev_scene
+        from experiments.datasets import frames, load_frame
 
-        specs = [s for s in dev_scenes() if s.junk is None][: 2 if a.quick else None]
+        specs = [s for s in frames(real=True) if not s.computed][: 2 if a.quick else None]
         tot = [0, 0]
         print(f"| scene | whole: useful of {runs} | s | tiles: useful | s |\n|---|---|---|---|---|")
         for spec in specs:
-            sc = load_dev_scene(spec, data)
+            sc = load_frame(spec, data)
             t0 = time.perf_counter()
             whole = run_pipeline(sc, cfg, metrics=False)
             t1 = time.perf_counter()

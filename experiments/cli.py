@@ -80,7 +80,7 @@ def schema_keys(schema: type, prefix: str = "") -> tuple[set[str], set[str]]:
     return keys, open_keys
 
 
-NOT_GROUPS = ("scene_lists", "labels")  # folders of conf/ that hold data, not Hydra options
+NOT_GROUPS = ("labels",)  # folders of conf/ that hold data, not Hydra options
 
 
 def config_groups() -> dict[str, list[str]]:

@@ -1,8 +1,7 @@
 """``python -m experiments.real_scenes``: the pipeline on a list of named scenes, scored.
 
-The scenes come from ``conf/scene_lists/<scene_list>.yaml`` (``dev``: the masked development
-scenes, as given, with computed disparity and the synthetic failure classes; ``unlabelled``: the
-OAK-D scenes without a mask). Each scene is run with ``ensemble`` seeds trained at once.
+The frames come from the dataset registry (``conf/datasets.yaml``): ``datasets=`` and ``frames=``
+select (default: the real datasets). Each frame is run with ``ensemble`` seeds trained at once.
 
 * A scene with a mask is scored: Table 1 counts, useful and all-objects hits, fail-safe runs,
   every labelled object separately.
@@ -12,9 +11,9 @@ OAK-D scenes without a mask). Each scene is run with ``ensemble`` seeds trained 
 Writes ``metrics.json`` (schema ``somtorch.scenes/1``: one row per scene, the resolved config)
 and ``results.md`` into the Hydra run folder, both staged and moved in only when every scene ran.
 
-    python -m experiments.real_scenes                                  # the real dev scenes, 20 runs
-    python -m experiments.real_scenes 'scenes=[kitti_est,motorcycle_q_sgbm,eth3d_terrace_sgbm,flyingthings3d_sgbm]'
-    python -m experiments.real_scenes scene_list=unlabelled objects.min_solidity=0
+    python -m experiments.real_scenes                                  # the real datasets, 20 runs
+    python -m experiments.real_scenes 'frames=[kitti_est,motorcycle_q_sgbm,eth3d_terrace_sgbm,flyingthings3d_sgbm]'
+    python -m experiments.real_scenes 'datasets=[oakd]' objects.min_solidity=0
     python -m experiments.real_scenes +preset=paper
     python -m experiments.real_scenes 'methods=[som,uv_disparity,dsw]'   # the task-level baselines beside it
 
@@ -44,8 +43,8 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from .scenes import dev_scenes, load_dev_scene
 from . import CONF
+from .datasets import frames, load_frame
 from .schema import RunConfig
 
 # absolute, so that the console script and python -m find the same configs from any directory
@@ -56,11 +55,11 @@ log = logging.getLogger("somtorch.real_scenes")
 
 @dataclass
 class ScenesConfig(RunConfig):
-    """The pipeline config plus which scenes: ``scene_list`` (a file of ``conf/scene_lists``) and
-    ``scenes`` (names in it; None = its real scenes, without the synthetic failure classes)."""
+    """The pipeline config plus which frames of the registry: ``datasets`` (None = the real ones)
+    and ``frames`` (names; None = every frame of those datasets)."""
 
-    scene_list: str = "dev"
-    scenes: Optional[list[str]] = None
+    datasets: Optional[list[str]] = None
+    frames: Optional[list[str]] = None
     junk_bound: float = 0.25
     methods: list[str] = field(default_factory=lambda: ["som"])
 
@@ -163,19 +162,17 @@ def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
     """Run every scene (all files read first); returns the content of ``metrics.json``."""
     from somtorch.pipeline import run_pipeline
 
-    specs = dev_scenes(cfg.scenes, cfg.scene_list)
-    if cfg.scenes is None:
-        specs = [s for s in specs if s.junk is None]
+    specs = frames(cfg.datasets, cfg.frames, real=True if cfg.datasets is None and cfg.frames is None else None)
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
     unknown = [m for m in cfg.methods if m not in ("som", "uv_disparity", "dsw")]
     if unknown or not cfg.methods:
         raise ValueError(f"methods={cfg.methods}: choose from som, uv_disparity, dsw")
-    scenes = [load_dev_scene(s, data_dir) for s in specs]  # every file checked before any training
+    scenes = [load_frame(s, data_dir) for s in specs]  # every file checked before any training
     rows = []
     for spec, scene in zip(specs, scenes):
         for method in cfg.methods:
             t0 = time.perf_counter()
-            head = {"scene": spec.name, "method": method, "folder": spec.folder, "disparity": spec.disparity,
+            head = {"scene": spec.name, "dataset": spec.dataset, "method": method, "folder": spec.folder, "disparity": spec.disparity,
                     "junk": spec.junk, "mode": "OR" if cfg.features.train_stride > 1 else "NOR"}
             if method == "som":
                 res = run_pipeline(scene, cfg, metrics=False)
@@ -192,7 +189,7 @@ def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
             rows.append(row)
             log.info("%s [%s]: %s", spec.name, method, ", ".join(
                 f"{k} {row[k]}" for k in ("useful_hits", "all_objects_hits", "low_solidity", "no_object") if k in row))
-    return {"schema": SCHEMA, "label": cfg.label, "scene_list": cfg.scene_list, "rows": rows,
+    return {"schema": SCHEMA, "label": cfg.label, "datasets": cfg.datasets, "rows": rows,
             "config": OmegaConf.to_container(OmegaConf.structured(cfg))}
 
 

@@ -1,84 +1,18 @@
-"""The development scenes, declared once in ``conf/scene_lists/dev.yaml`` and loaded here.
-
-Every consumer (the validation protocol, the computed-disparity and real-scene scripts, the
-quality tests) reads the same list, so a scene is added in one place.
+"""Loading the frames of the dataset registry (:mod:`experiments.datasets`) and the synthetic failure
+classes added to real scenes (:func:`add_junk`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 from . import CONF
 
-SCENE_LISTS = CONF / "scene_lists"
-SCENES_FILE = SCENE_LISTS / "dev.yaml"
 LABELS = CONF / "labels"
 
 
-@dataclass
-class SceneSpec:
-    """One development scene: ``folder`` under the data root and where its disparity comes from.
-
-    ``disparity``: ``"gt"`` (the folder's own map), a file name in the folder (e.g. KITTI's
-    ``disp_est.png``), or ``"sgbm"``: computed from ``left`` / ``right`` with our default SGBM and
-    ``ndisp`` disparities. The folder's object masks score every variant.
-
-    ``labels``: a polygon label file under ``conf/labels/`` (:func:`somtorch.disparity.labels.
-    read_polygon_labels`) that gives the scene its objects where the data folder has no mask.
-
-    ``junk``: a synthetic failure class added to the map (see :func:`add_junk`): ``"border"`` (a
-    band of speckles along the top and left borders at the main object's disparity, as SGBM leaves
-    where the other view has no match), ``"specks"`` (isolated 2×2 specks near the object, also at
-    its disparity), ``"pole"`` (a thin pole in front of the object, occluding it: the issue's
-    traffic-light pole; 1.5 % of the width, 1.25 × the object's 95th-percentile disparity, from
-    half-way between the image top and the object's top down to the bottom row, a third of the
-    way across the object), ``"flip"`` (the mirrored scene: a check that the rule has no
-    left/right bias) or ``"resample:F"`` (the map resampled by the factor F).
-    """
-
-    name: str
-    folder: str
-    disparity: str = "gt"
-    left: Optional[str] = None
-    right: Optional[str] = None
-    ndisp: int = 128
-    junk: Optional[str] = None
-    labels: Optional[str] = None
-
-    @property
-    def computed(self) -> bool:
-        return self.disparity != "gt" or self.junk is not None
-
-
-def dev_scenes(names: list[str] | None = None, scene_list: str = "dev") -> list[SceneSpec]:
-    """The specs of ``conf/scene_lists/<scene_list>.yaml``: all in the file's order, or those named
-    in the given order."""
-    import yaml
-
-    path = SCENE_LISTS / f"{scene_list}.yaml"
-    if not path.is_file():
-        known = sorted(p.stem for p in SCENE_LISTS.glob("*.yaml"))
-        raise ValueError(f"scene_list={scene_list!r}: no {path}; known lists: {known}")
-    specs = [SceneSpec(**d) for d in yaml.safe_load(path.read_text())]
-    for s in specs:
-        if s.junk is not None:
-            try:
-                check_junk_kind(s.junk)
-            except ValueError as e:
-                raise ValueError(f"{path}: scene {s.name!r}: {e}") from None
-    if names is None:
-        return specs
-    known = {s.name for s in specs}
-    unknown = [n for n in names if n not in known]
-    if unknown:
-        raise ValueError(f"unknown scene(s) {unknown}; {path} lists {sorted(known)}")
-    by_name = {s.name: s for s in specs}
-    return [by_name[n] for n in names]
-
-
-def load_dev_scene(spec: SceneSpec, data_dir: str | Path) -> Any:
+def load_dev_scene(spec: Any, data_dir: str | Path) -> Any:
     """The :class:`~somtorch.disparity.scene.Scene` of ``spec`` with the folder's object masks (or
     those of ``spec.labels``)."""
     scene = _load(spec, Path(data_dir))
@@ -92,7 +26,7 @@ def load_dev_scene(spec: SceneSpec, data_dir: str | Path) -> Any:
     return add_junk(scene, spec.junk, seed=sum(map(ord, spec.name))) if spec.junk else scene
 
 
-def _load(spec: SceneSpec, data_dir: Path) -> Any:
+def _load(spec: Any, data_dir: Path) -> Any:
     from somtorch.disparity.io import read_image
     from somtorch.disparity.scene import load_scene, scene_from_arrays
     from somtorch.disparity.stereo import SGBMParams, compute_disparity
@@ -139,7 +73,7 @@ def check_junk_kind(kind: str) -> None:
 
 
 def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
-    """A copy of ``scene`` with a synthetic failure class added (see :class:`SceneSpec` ``junk``).
+    """A copy of ``scene`` with a synthetic failure class added (see :class:`experiments.datasets.FrameSpec` ``junk``).
 
     The junk sits at the main object's median disparity, so that disparity alone cannot tell it
     from the object; the masks are unchanged (junk pixels are background).

@@ -38,6 +38,11 @@ class _Layout:
     disparities: tuple[str, ...]  # candidates, first present wins
     image: str
     camera: Callable[[Path, tuple[int, int]], tuple[Camera | None, str | None]]
+    scale: float | None = None  # stored value x scale = px, where the layout fixes it (8-bit PNG)
+
+
+def _no_camera(folder: Path, hw: tuple[int, int]) -> tuple[Camera | None, str | None]:
+    return None, None
 
 
 _LAYOUTS = (
@@ -45,6 +50,10 @@ _LAYOUTS = (
     _Layout("kitti", ("disp_gt.png",), "image.png", _kitti_camera),
     _Layout("sceneflow", ("disparity_left.pfm",), "left_cleanpass.png", _sceneflow_camera),
     _Layout("oakd", ("disp_sgbm.png",), "left.png", _oakd_camera),
+    # Middlebury 2005/2006 at third size (uint8 / 3) and 2003 at quarter size (uint8 / 4): no
+    # calibration is published for these sets
+    _Layout("middlebury2005", ("disp1.png",), "view1.png", _no_camera, 1 / 3),
+    _Layout("middlebury2003", ("disp2.png",), "im2.png", _no_camera, 1 / 4),
 )
 
 # full-resolution Middlebury 2014 "Motorcycle-perfect" calib.txt (2964x2000), the source of skimage's copy
@@ -76,12 +85,14 @@ def load_scene(spec: str | Path, *, disparity_file: str | Path | None = None,
       - ``sceneflow``: ``disparity_left.pfm``, ``left_cleanpass.png``; f=1050, cx=479.5, cy=269.5,
         baseline 1 (``"unit"``);
       - ``oakd``: ``disp_sgbm.png``, ``left.png``, ``stereodemo_calibration.json``;
+      - ``middlebury2005`` (2005/2006 third size): ``disp1.png`` (uint8 / 3 px), ``view1.png``, no
+        camera; ``middlebury2003`` (Teddy, quarter size): ``disp2.png`` (uint8 / 4 px), ``im2.png``;
 
       plus ``objects.png`` + ``objects.json`` when present (:class:`ObjectInfo` from the json's
       ``objects`` list). ``disparity_file`` (relative to the folder, or absolute) overrides the
       disparity, e.g. ``"disp_est.png"`` for the KITTI estimate, and ``disparity_scale`` its
       encoding (stored value × scale = px), e.g. ``0.25`` for the 8-bit ``disp2.png`` of the
-      Middlebury 2003 scenes (``1/8`` for 2001, ``1`` for the third-size 2005/2006 ``disp1.png``).
+      Middlebury 2001 scenes (``1/8``); the 2003 and 2005/2006 layouts set theirs.
     * a ``.pfm``/``.png``/``.npy``/``.npz`` file: disparity only, no image or camera.
 
     Raises:
@@ -141,6 +152,8 @@ def _detect_layout(folder: Path, disparity_file: str | Path | None) -> tuple[_La
 
 def _load_folder(folder: Path, disparity_file: str | Path | None, disparity_scale: float | None = None) -> Scene:
     layout, disp_path = _detect_layout(folder, disparity_file)
+    if disparity_scale is None and layout is not None and disparity_file is None:
+        disparity_scale = layout.scale
     disparity, valid = read_disparity(disp_path, scale=disparity_scale)
     _require_some_valid(disp_path, valid)
     hw = (disparity.shape[0], disparity.shape[1])

@@ -27,6 +27,18 @@ def test_square_polygon_fills_its_pixels(tmp_path):
     assert info[0].name == "box" and info[0].main
 
 
+def test_overlapping_pieces_of_one_object_unite_and_do_not_cancel(tmp_path):
+    a = [[2, 2], [8, 2], [8, 8], [2, 8]]
+    b = [[5, 5], [12, 5], [12, 12], [5, 12]]  # overlaps a in [5..8] x [5..8]
+    holes = [[[3, 3], [6, 3], [6, 6], [3, 6]], [[4, 4], [7, 4], [7, 7], [4, 7]]]  # overlapping exclusions
+    p = _write(tmp_path, [{"id": 1, "name": "two_pieces", "polygons": [a, b], "exclude": holes}], size_hw=[16, 16])
+    objects, _ = read_polygon_labels(p, (16, 16))
+    # the pieces' overlap outside the holes stays filled (one fillPoly call would cancel it)
+    assert int(objects[8, 8]) == 1 and int(objects[8, 5]) == 1 and int(objects[5, 8]) == 1
+    assert int(objects[12, 12]) == 1 and int(objects[2, 2]) == 1
+    assert bool((objects[3:7, 3:7] == 0).all()) and bool((objects[4:8, 4:8] == 0).all())  # both holes cut
+
+
 def test_overlap_goes_to_the_lower_id_and_exclusions_cut(tmp_path):
     p = _write(tmp_path, [
         {"id": 2, "name": "back", "polygons": [[[0, 0], [9, 0], [9, 9], [0, 9]]]},
@@ -62,12 +74,12 @@ def test_malformed_files_name_the_field(tmp_path, objects, extra, field):
 def test_repository_labels_fit_their_scenes(shared_data):
     """The labels of conf/labels: each object lies mostly on valid disparity and the main one is
     the one of most valid pixels among those that are not mostly in the no-disparity columns."""
-    from experiments.scenes import dev_scenes, load_dev_scene
+    from experiments.datasets import frames, load_frame
 
-    specs = [s for s in dev_scenes() if s.labels]
-    assert len(specs) == 4
+    specs = [s for s in frames(synthetic=False) if s.labels and s.disparity == "gt"]
+    assert len(specs) >= 4
     for spec in specs:
-        scene = load_dev_scene(spec, shared_data)
+        scene = load_frame(spec, shared_data)
         assert scene.main_object_mask is not None and sum(o.main for o in scene.object_info) == 1
         for o in scene.object_info:
             m = scene.object_mask(o.id)

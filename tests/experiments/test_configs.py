@@ -26,8 +26,7 @@ register()
 
 
 def _options() -> list[tuple[str, str]]:
-    # conf/scene_lists holds scene lists (read by experiments.scenes), not options of the run config
-    return sorted((p.parent.name, p.stem) for p in CONF.glob("*/*.yaml") if p.parent.name not in ("experiment", "scene_lists"))
+    return sorted((p.parent.name, p.stem) for p in CONF.glob("*/*.yaml") if p.parent.name != "experiment")
 
 
 def _experiments() -> list[str]:

@@ -1,4 +1,5 @@
-"""The leave-one-scene-out protocol: the choice of each fold never sees the left-out scene."""
+"""The leave-one-dataset-out protocol: the registry, the adoption rule on tables whose answer is
+known, the segmentation cache, and the command end to end."""
 
 from __future__ import annotations
 
@@ -7,48 +8,113 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from experiments.scenes import dev_scenes, load_dev_scene
-from experiments.validate import SceneCache, choose
+from experiments.datasets import datasets, frames, load_frame
+from experiments.protocol import FrameTable, decide
+from experiments.validate import SceneCache
 from somtorch.config import PipelineConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-class _Fixed:
-    """A scene whose scores are given (to test the selection rule alone)."""
-
-    def __init__(self, table):
-        self.table = table
-
-    def score(self, overrides):
-        key = ",".join(f"{k}={v}" for k, v in sorted(overrides.items())) or "default"
-        return {"useful_hits": self.table[key], "all_objects_hits": 0}
-
-
-def test_choose_takes_the_best_value_on_the_given_scenes_and_the_default_on_ties():
-    a = _Fixed({"default": 5, "x.y=1": 9, "x.y=2": 5})
-    b = _Fixed({"default": 5, "x.y=1": 0, "x.y=2": 5})
-    grid, defaults = {"x.y": [1, 2]}, {"x.y": 0}
-    assert choose([a], grid, defaults) == {"x.y": 1}
-    assert choose([b], grid, defaults) == {}  # value 2 only ties: the default stays
-    assert choose([a, b], grid, defaults) == {}  # 9 + 0 < 5 + 5: on both scenes the default wins
+def _table(sizes, real):
+    ds, groups, rl = [], [], []
+    for (name, n), r in zip(sizes.items(), real):
+        for i in range(n):
+            ds.append(name)
+            groups.append(f"{name}/{i}")
+            rl.append(r)
+    return FrameTable(ds, groups, rl, n_boot=2000, seed=0)
 
 
-def test_every_dev_scene_spec_is_unique_and_the_computed_ones_name_their_source():
-    specs = dev_scenes()
-    assert len({s.name for s in specs}) == len(specs) >= 12
+def test_a_fix_for_one_failure_class_that_harms_none_is_adopted():
+    # three real datasets of 10 frames; the candidate gains 0.6 on 4 frames of one, changes nothing else
+    t = _table({"a": 10, "b": 10, "c": 10}, [True, True, True])
+    base = np.full(30, 0.4)
+    cand = base.copy()
+    cand[[0, 1, 2, 3]] += 0.6
+    d = decide(t, cand, base, cand, base)
+    assert d.adopt and d.useful[0] == pytest.approx(0.08) and d.useful[1] > 0, d
+    # the same gain on two frames only is not evidence (a resample without both is too likely)
+    cand[[2, 3]] = 0.4
+    d = decide(t, cand, base, cand, base)
+    assert not d.adopt and d.useful[1] == 0.0 and d.non_inferior, d
+
+
+def test_a_gain_carried_by_two_frames_against_losses_elsewhere_is_not_adopted():
+    t = _table({"a": 10, "b": 10, "c": 10}, [True, True, True])
+    base = np.full(30, 0.6)
+    cand = base.copy()
+    cand[[0, 1]] += 0.4  # two frames gain 0.4 ...
+    cand[[10, 13, 16, 20, 25]] -= 0.2  # ... five lose 0.2 in the other datasets
+    d = decide(t, cand, base, cand, base)
+    assert not d.adopt and d.useful[1] < 0 < d.useful[2], d
+
+
+def test_a_dataset_losing_more_than_the_margin_blocks_adoption_even_with_a_clear_macro_gain():
+    t = _table({"a": 10, "b": 10, "syn": 10}, [True, True, False])
+    base = np.full(30, 0.5)
+    cand = base.copy()
+    cand[:20] += 0.3  # every real frame gains ...
+    cand[20:] -= 0.2  # ... the synthetic dataset loses 0.2 > 0.10
+    d = decide(t, cand, base, cand, base)
+    assert d.useful[1] > 0 and not d.adopt and d.worst == ("syn", pytest.approx(-0.2)), d
+    assert any("syn loses" in r for r in d.reasons)
+
+
+def test_synthetic_gains_alone_are_evidence_not_the_verdict():
+    t = _table({"a": 10, "syn": 10}, [True, False])
+    base = np.full(20, 0.5)
+    cand = base.copy()
+    cand[10:] += 0.4
+    d = decide(t, cand, base, cand, base)
+    assert not d.adopt and d.useful == (0.0, 0.0, 0.0) and d.useful_all[0] == pytest.approx(0.2)
+
+
+def test_the_all_objects_reading_may_not_drop():
+    t = _table({"a": 10, "b": 10}, [True, True])
+    base = np.full(20, 0.5)
+    d = decide(t, base + 0.2, base, base - 0.05, base)
+    assert not d.adopt and any("all-objects" in r for r in d.reasons)
+
+
+def test_the_macro_average_counts_each_dataset_once_and_groups_move_together():
+    t = FrameTable(["a"] * 4 + ["b"], ["s1", "s1", "s2", "s3", "t1"], [True] * 5, n_boot=500)
+    v = np.array([1.0, 0.0, 1.0, 1.0, 0.0])
+    # a: groups s1 (mean 0.5), s2 (1), s3 (1) -> 5/6; b: 0 -> macro 5/12 whatever the frame counts
+    assert t.per_dataset(v) == {"a": pytest.approx(5 / 6), "b": 0.0}
+    point, lo, hi = t.macro(v)
+    assert point == pytest.approx(5 / 12) and lo <= point <= hi
+    assert t.subset(["b"]).names == ["b"]
+
+
+def test_the_registry_groups_every_frame_by_dataset():
+    specs = frames()
+    assert len({s.name for s in specs}) == len(specs)
+    names = [d.name for d in datasets()]
+    for need in ("middlebury2014", "middlebury_2005_2006", "kitti2015", "eth3d", "oakd", "flyingthings3d",
+                 "junk", "synth_stairs_oakd", "synth_garden_kitti"):
+        assert need in names
+    assert {d.name for d in datasets(real=True)} == {"middlebury2014", "middlebury_2005_2006", "kitti2015",
+                                                     "eth3d", "oakd"}
     for s in specs:
         if s.disparity == "sgbm":
             assert s.left and s.right and s.ndisp % 16 == 0
-    with pytest.raises(ValueError, match="unknown scene"):
-        dev_scenes(["nope"])
+        assert s.group, s
+    # the GT and SGBM versions of one scene share a group (the bootstrap resamples scenes)
+    mb = frames(datasets=["middlebury_2005_2006"])
+    assert len(mb) % 2 == 0 and len({s.group for s in mb}) == len(mb) // 2
+    with pytest.raises(ValueError, match="unknown frame"):
+        frames(names=["nope"])
+    with pytest.raises(ValueError, match="unknown dataset"):
+        frames(datasets=["nope"])
 
 
 def test_scene_cache_segments_once_per_upstream_setting(shared_data):
-    spec = dev_scenes(["kitti"])[0]
-    cache = SceneCache(spec, load_dev_scene(spec, shared_data), PipelineConfig(ensemble=2))
+    spec = frames(names=["kitti"])[0]
+    cache = SceneCache(spec, load_frame(spec, shared_data), PipelineConfig(ensemble=2))
     base = cache.score({})
     assert base["runs"] == 2 and 0 <= base["useful_hits"] <= 2 and base["x_opt"] > 0
     cache.score({"objects.merge": 0.5})
@@ -56,45 +122,40 @@ def test_scene_cache_segments_once_per_upstream_setting(shared_data):
     cache.score({"ground.max_below_frac": 1.0})
     assert len(cache._seg) == 2  # a ground constant does not
     assert cache.score({}) is base
+    sal = cache.score({}, saliency=True)["saliency"]
+    assert 0 <= sal["f_measure"] <= 1 and 0 <= sal["mae"] <= 1 and 0 <= sal["s_measure"] <= 1
 
 
-def test_validate_command_writes_the_left_out_table(shared_data, tmp_path):
+def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "experiments.validate", f"hydra.run.dir={tmp_path}", "ensemble=2",
-         "train.epochs=3", "scenes=[kitti,oakd_toy,eth3d_terrace]", f"paths.data_dir={shared_data}",
-         "~grid", "+grid={objects.merge: [0.5], reduction.tolerance_image: [0.03]}",
-         "transforms=[flip,resample:0.5]"],
+         "train.epochs=3", "frames=[kitti,kitti_est,oakd_toy,oakd_cycles,eth3d_terrace]",
+         f"paths.data_dir={shared_data}", "n_boot=200", "~grid", "~neutral",
+         "+grid={objects.merge: [0.0, 0.5], reduction.tolerance_image: [0.03]}", "+neutral={objects.merge: 0.0}",
+         "transforms=[flip]"],
         cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     rep = json.loads((tmp_path / "validate.json").read_text())
-    assert [r["scene"] for r in rep["rows"]] == ["kitti", "oakd_toy", "eth3d_terrace"]
-    for part in ("default", "in_sample", "left_out"):
-        assert rep["totals"][part]["runs"] == 6
-        assert rep["totals"][part]["useful_hits"] == sum(r[part]["useful_hits"] for r in rep["rows"])
-    for r in rep["rows"]:  # each fold's choice is the one made on the other two scenes
-        others = [c for c in rep["rows"] if c is not r]
-        for key, value in r["fold_choice"].items():
-            k = f"{key}={value}"
-            assert sum(rep["candidates"][o["scene"]][k]["useful_hits"] for o in others) >= \
-                sum(rep["candidates"][o["scene"]]["default"]["useful_hits"] for o in others)
-    md = (tmp_path / "validate.md").read_text()
-    assert "**total**" in md
-    for r in rep["rows"]:  # every run is a useful hit or one kind of miss
+    assert [r["frame"] for r in rep["rows"]] == ["kitti", "kitti_est", "oakd_toy", "oakd_cycles", "eth3d_terrace"]
+    assert set(rep["folds"]) == {"kitti2015", "oakd", "eth3d"}
+    sm = rep["summary"]
+    assert sm["datasets"]["kitti2015"]["frames"] == 2 and sm["datasets"]["oakd"]["runs"] == 4
+    # the macro average counts each dataset once
+    per = [sm["datasets"][d]["default_useful_hits"] for d in ("kitti2015", "oakd", "eth3d")]
+    assert sm["macro_real"]["default_useful_hits"] == pytest.approx(sum(per) / 3)
+    for r in rep["rows"]:  # the left-out figure uses the choice of the fold without the frame's dataset
+        choice = rep["folds"][r["dataset"]]["choice"]
+        key = ",".join(f"{k}={choice[k]}" for k in sorted(choice)) or "default"
+        assert r["left_out"]["useful_hits"] == rep["candidates"][r["frame"]][key]["useful_hits"]
         d = r["default"]
         assert d["useful_hits"] + sum(d["misses"].values()) == d["runs"], d
-    # the robustness checks: every scene transformed, scored with the defaults, in the report
-    rob = rep["robustness"]
-    assert list(rob) == ["flip", "resample:0.5"]
-    for kind in rob:
-        assert sorted(rob[kind]) == ["eth3d_terrace", "kitti", "oakd_toy"]
-        assert all(v["runs"] == 2 and 0 <= v["useful_hits"] <= 2 for v in rob[kind].values())
-    assert rob["resample:0.5"]["kitti"]["x_opt"] != rep["rows"][0]["default"]["x_opt"]  # another map
-    assert "| scene | as given | flip | resample:0.5 |" in md
-    lines = md.splitlines()
-    head = next(i for i, line in enumerate(lines) if line.startswith("| candidate |"))
-    assert lines[head + 2].startswith("| default |")  # the candidate table is in one piece
-    assert md.index("| scene | as given |") > head
-    assert "of 6 |" in lines[-1]  # each column's total says over how many runs
+    kn = rep["knobs"]["objects.merge"]
+    assert kn["verdict"] in ("keep", "remove") or kn["verdict"].startswith("adopt")
+    assert [e["value"] for e in kn["values"]] == [0.0, 0.5] and kn["values"][0]["neutral"]
+    assert rep["knobs"]["reduction.tolerance_image"]["verdict"] != "remove"  # no neutral value given
+    md = (tmp_path / "validate.md").read_text()
+    assert "| **macro, real** |" in md and "| objects.merge | 0.75 | 0.0 (neutral) |" in md
+    assert list(rep["robustness"]) == ["flip"] and "| flip |" in md
 
 
 def _toy_scene():

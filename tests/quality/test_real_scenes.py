@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from experiments.scenes import dev_scenes, load_dev_scene
+from experiments.datasets import frames, load_frame
 from somtorch.disparity.scene import load_scene
 from somtorch.pipeline import PipelineConfig, run_pipeline
 
@@ -23,7 +23,7 @@ BASELINE = json.loads((Path(__file__).with_name("baseline.json")).read_text())
 
 @pytest.mark.parametrize("name", list(BASELINE["gates"]))
 def test_defaults_give_useful_hits_on_the_development_scenes(shared_data, name):
-    scene = load_dev_scene(dev_scenes([name])[0], shared_data)
+    scene = load_frame(frames(names=[name])[0], shared_data)
     n = BASELINE["runs"]
     result = run_pipeline(scene, PipelineConfig(ensemble=n), metrics=False)
     scores = [m.score for m in result.members]
@@ -58,7 +58,7 @@ def test_purity_and_solidity_tests_reject_sgbm_junk_on_a_computed_disparity_map(
     with both, 16 with the solidity test only, 9 with neither; at objects.map_stride 1: 19 / 17 / 8)."""
     from somtorch.tasks.objects import AreaConfig
 
-    scene = load_dev_scene(dev_scenes(["eth3d_terrace_sgbm"])[0], shared_data)
+    scene = load_frame(frames(names=["eth3d_terrace_sgbm"])[0], shared_data)
     useful = {}
     for purity, solid in ((0.25, 0.25), (0.0, 0.25), (0.0, 0.0)):
         cfg = PipelineConfig(ensemble=20, objects=AreaConfig(min_purity=purity, min_solidity=solid))
@@ -96,10 +96,10 @@ def test_the_ground_mask_takes_almost_no_object_pixels_on_the_real_development_s
     from somtorch.tasks.ground import fit_ground_plane
 
     shares = {}
-    for spec in dev_scenes():
+    for spec in frames(synthetic=False):
         if spec.junk is not None:
             continue
-        scene = load_dev_scene(spec, shared_data)
+        scene = load_frame(spec, shared_data)
         for seed in (0, 1):
             g = fit_ground_plane(scene.disparity, scene.valid, GroundConfig(seed=seed))
             shares[spec.name, seed] = ground_object_share(g, scene)
