@@ -30,8 +30,10 @@ def _sgbm_schema() -> type:
     from somtorch.disparity.stereo import SGBMParams
 
     hints = typing.get_type_hints(SGBMParams)
-    return dataclasses.make_dataclass("SGBMConfig", [(f.name, hints[f.name], field(default=f.default))
-                                                     for f in dataclasses.fields(SGBMParams)])
+    cls = dataclasses.make_dataclass("SGBMConfig", [(f.name, hints[f.name], field(default=f.default))
+                                                    for f in dataclasses.fields(SGBMParams)])
+    cls.__module__ = __name__  # a config holding it pickles by reference (the validation's workers)
+    return cls
 
 
 SGBMConfig = _sgbm_schema()

@@ -63,6 +63,7 @@ class ValidateConfig(RunConfig):
         neutral: ``{"group.field": value}`` that switches a check off; always tried (a removal candidate).
         gallery: a folder: one picture of member 0 per frame (defaults); None = no pictures.
         n_boot: bootstrap resamples of the adoption rule's interval.
+        workers: frames scored in this many processes (1 = in this one).
         loss_margin: the largest drop of one dataset's hit rate a change may cost.
         ni_margin: non-inferiority margin of a removal (and of the all-objects reading).
         transforms: robustness checks: every frame transformed (``flip``, ``resample:F``, ``pole``, ``border``, ``specks``; experiments.scenes.add_junk) and scored with the defaults.
@@ -74,6 +75,7 @@ class ValidateConfig(RunConfig):
     neutral: dict[str, Any] = field(default_factory=dict)
     gallery: Optional[str] = None  # a folder: one picture of member 0 per frame (defaults)
     n_boot: int = 2000
+    workers: int = 2  # frames scored in this many processes (1 = in this one)
     loss_margin: float = 0.10  # the largest drop of one dataset's hit rate a change may cost
     ni_margin: float = 0.02  # non-inferiority margin of a removal (and of the all-objects reading)
     # robustness: every frame transformed (experiments.scenes.add_junk: "flip", "resample:F",
@@ -88,11 +90,18 @@ def _key(overrides: dict[str, Any]) -> str:
 class SceneCache:
     """One development scene: its segmentations per upstream setting, scores per candidate."""
 
-    def __init__(self, spec: Any, scene: Any, base: Any) -> None:
-        self.spec, self.scene, self.base = spec, scene, base
+    def __init__(self, spec: Any, scene: Any, base: Any, loader: Any = None) -> None:
+        self.spec, self._scene, self.base, self._loader = spec, scene, base, loader
         self._seg: dict[str, Any] = {}
         self._target: Any = None  # the scene's all-objects target, computed once
         self.scores: dict[str, dict[str, Any]] = {}
+
+    @property
+    def scene(self) -> Any:
+        """The frame's scene (loaded on first use when the cache was built from scores alone)."""
+        if self._scene is None:
+            self._scene = self._loader()
+        return self._scene
 
     def members(self, overrides: dict[str, Any]) -> tuple[Any, list]:
         """``(ground plane, member results)`` of the base config with ``overrides``; the segmentation
@@ -198,6 +207,20 @@ class SceneCache:
         return path
 
 
+def _score_frame(job: tuple) -> dict[str, dict[str, Any]]:
+    """A worker's job: every candidate of ``keys`` (``[(overrides, saliency)]``) on one frame."""
+    spec, base, keys, data_dir, threads = job
+    import torch
+
+    torch.set_num_threads(threads)
+    from .datasets import load_frame
+
+    cache = SceneCache(spec, load_frame(spec, data_dir), base)
+    for ov, sal in keys:
+        cache.score(ov, saliency=sal)
+    return cache.scores
+
+
 class Protocol:
     """Per-frame rates of every scored candidate over one set of frame caches, and the choices."""
 
@@ -287,24 +310,34 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     base = cfg  # a ValidateConfig is a PipelineConfig: the extra fields do not reach the pipeline
     defaults = {k: _default_of(base, k) if "+" not in k else [_default_of(base, n) for n in k.split("+")]
                 for k in grid}
-    scenes = [load_frame(s, data_dir) for s in specs]  # every file read before any training
-    caches = [SceneCache(spec, scene, base) for spec, scene in zip(specs, scenes)]
-    del scenes
+    keys = [({}, True)] + [(_overrides(k, v, defaults), False) for k, values in grid.items() for v in values]
     t0 = time.perf_counter()
-    iterator = caches
-    try:
-        from tqdm import tqdm
+    progress = _progress(len(specs))
+    if cfg.workers > 1 and len(specs) > 1:
+        # frames in worker processes (one thread each); the scores come back, the segmentations do
+        # not: a combination the choice needs later is segmented again here, deterministically
+        import concurrent.futures as cf
+        import multiprocessing as mp
+        from functools import partial
 
-        iterator = tqdm(caches, desc="frames", unit="frame", disable=None)
-    except ImportError:  # pragma: no cover - tqdm is a dependency
-        pass
-    for c in iterator:
-        c.score({}, saliency=True)
-        for k, values in grid.items():
-            for v in values:
-                c.score(_overrides(k, v, defaults))
-        log.debug("%s: default %d useful of %d (%.1f s)", c.spec.name, c.scores["default"]["useful_hits"],
-                  c.scores["default"]["runs"], time.perf_counter() - t0)
+        for s in specs:  # every file checked before any training
+            load_frame(s, data_dir)
+        caches = [SceneCache(s, None, base, loader=partial(load_frame, s, data_dir)) for s in specs]
+        with cf.ProcessPoolExecutor(cfg.workers, mp_context=mp.get_context("spawn")) as pool:
+            futures = {pool.submit(_score_frame, (s, base, keys, data_dir, 1)): i for i, s in enumerate(specs)}
+            for fut in cf.as_completed(futures):
+                caches[futures[fut]].scores = fut.result()
+                progress.update(1)
+    else:
+        scenes = [load_frame(s, data_dir) for s in specs]  # every file read before any training
+        caches = [SceneCache(spec, scene, base) for spec, scene in zip(specs, scenes)]
+        del scenes
+        for c in caches:
+            for ov, sal in keys:
+                c.score(ov, saliency=sal)
+            progress.update(1)
+    progress.close()
+    log.info("%d frames scored with %d candidates in %.0f s", len(caches), len(keys), time.perf_counter() - t0)
     proto = Protocol(caches, cfg, grid, defaults)
     in_sample, in_sample_steps = proto.choose()
     for c in caches:
@@ -341,6 +374,13 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
             "candidates": {c.spec.name: {k: {m: v[m] for m in ("runs", "useful_hits", "all_objects_hits")}
                                          for k, v in c.scores.items()} for c in caches},
             "robustness": robustness, "wall_s": time.perf_counter() - t0}
+
+
+def _progress(total: int) -> Any:
+    """A progress bar over the frames (tqdm; off where stderr is not a terminal)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="frames", unit="frame", disable=None)
 
 
 def _verdict(key: str, entries: list[dict[str, Any]], in_sample: dict[str, Any], cfg: ValidateConfig) -> str:
