@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+from . import CONF  # the clone's conf/, or the one shipped in the wheel
 
 
 def field_types(schema: type, prefix: str = "") -> dict[str, Any]:
@@ -163,7 +163,7 @@ def interruptible(out_dir: Path | None) -> Iterator[None]:
         msg = f"interrupted ({e.signal_name}){where}; {tail}"
         import logging
 
-        from experiments.schema import log_to_file
+        from .schema import log_to_file
 
         log_to_file(logging.getLogger("somtorch"), logging.WARNING, "%s", msg)
         print(msg, file=sys.stderr)

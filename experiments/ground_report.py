@@ -15,7 +15,7 @@ import argparse
 import time
 from dataclasses import fields, replace
 
-from experiments.datasets import frames, load_frame
+from .datasets import frames, load_frame
 
 
 def _config(pairs: list[str]):

@@ -15,7 +15,7 @@ Examples::
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from experiments.help import maybe_print_help
+    from .help import maybe_print_help
 
     maybe_print_help("run")
 
@@ -31,10 +31,11 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.schema import RunConfig, register
+from . import CONF
+from .schema import RunConfig, register
 
 # absolute, so that the console script and python -m find the same configs from any directory
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = str(CONF)
 log = logging.getLogger("somtorch.run")
 register()
 
@@ -144,7 +145,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
             done()
         from tqdm.auto import tqdm
 
-        from experiments.cli import show_progress
+        from .cli import show_progress
 
         steps = ["pipeline"] + (["maps"] if cfg.output.maps else []) + (["point clouds"] if cfg.output.pointcloud else [])
         bar = tqdm(total=len(steps), desc=f"{scene.name}", unit="stage", disable=not show_progress(), leave=False)
@@ -210,7 +211,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     if s:
         log.info("object: identified_100 %d/%d, identified_95 %d/%d, useful hits %d, x_opt %.1f %%",
                  s["identified_100"], s["runs"], s["identified_95"], s["runs"], s["useful_hits"], s["x_opt"])
-    from experiments.schema import log_to_file
+    from .schema import log_to_file
 
     log_to_file(log, logging.INFO, "outputs in %s", out_dir)
     print(f"outputs in {out_dir}", flush=True)  # always, --quiet too: where the results are
@@ -237,11 +238,11 @@ def _log_hparams(writer, cfg: RunConfig, metrics: dict) -> None:
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="run")
 def main(dcfg: DictConfig) -> dict:
     """Hydra entry point."""
-    from experiments.cli import configure_threads
+    from .cli import configure_threads
 
     configure_threads()
-    from experiments.cli import interruptible, marked_if_failed, quiet
-    from experiments.schema import one_line_errors
+    from .cli import interruptible, marked_if_failed, quiet
+    from .schema import one_line_errors
     from somtorch.atomic import exclusive_folder
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
@@ -260,7 +261,7 @@ def main(dcfg: DictConfig) -> dict:
 
 def cli() -> None:
     """Console entry: the overrides are checked against the schema first ("did you mean")."""
-    from experiments.cli import run_checked
+    from .cli import run_checked
 
     run_checked(main, RunConfig)
 

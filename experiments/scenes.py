@@ -7,7 +7,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-LABELS = Path(__file__).resolve().parents[1] / "conf" / "labels"
+from . import CONF
+
+LABELS = CONF / "labels"
 
 
 def load_dev_scene(spec: Any, data_dir: str | Path) -> Any:

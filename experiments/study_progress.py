@@ -39,7 +39,7 @@ def estimate_jobs(config: DictConfig, jobs: list[list[str]]) -> tuple[float, int
 
     from hydra.core.global_hydra import GlobalHydra
 
-    from experiments.run import load_input
+    from .run import load_input
     from somtorch.pipeline import resource_estimate
 
     loader = GlobalHydra.instance().config_loader()
@@ -81,7 +81,7 @@ class StudyProgress(Callback):
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         from tqdm.auto import tqdm
 
-        from experiments.cli import quiet, show_progress
+        from .cli import quiet, show_progress
         from somtorch.resources import fmt_bytes, fmt_seconds
 
         jobs = sweep_jobs(config)

@@ -14,7 +14,7 @@ Writes ``n`` frames (seeds ``start .. start + n - 1``) per family x camera into
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from experiments.help import maybe_print_help
+    from .help import maybe_print_help
 
     maybe_print_help("synth")
 
@@ -25,10 +25,11 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.schema import register
-from experiments.synth_config import SynthConfig
+from . import CONF
+from .schema import register
+from .synth_config import SynthConfig
 
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = str(CONF)
 log = logging.getLogger("somtorch.synth")
 register()
 
@@ -103,8 +104,8 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="synth")
 def main(dcfg: DictConfig) -> dict:
-    from experiments.cli import show_progress
-    from experiments.schema import one_line_errors
+    from .cli import show_progress
+    from .schema import one_line_errors
 
     with one_line_errors(log):
         cfg: SynthConfig = OmegaConf.to_object(dcfg)
@@ -113,7 +114,7 @@ def main(dcfg: DictConfig) -> dict:
 
 def cli() -> None:
     """Console entry: the overrides are checked against the schema first ("did you mean")."""
-    from experiments.cli import run_checked
+    from .cli import run_checked
 
     run_checked(main, SynthConfig)
 

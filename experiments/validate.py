@@ -27,7 +27,7 @@ Writes ``validate.json`` (every per-frame figure, every decision, every fold's c
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from experiments.help import maybe_print_help
+    from .help import maybe_print_help
 
     maybe_print_help("validate")
 
@@ -44,18 +44,30 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.schema import RunConfig, register
+from . import CONF
+from .schema import RunConfig, register
 
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = str(CONF)
 log = logging.getLogger("somtorch.validate")
 UPSTREAM = ("features", "ground", "som", "train", "baseline", "method", "ensemble", "seed")
 
 
 @dataclass
 class ValidateConfig(RunConfig):
-    """The pipeline config plus which frames (``datasets`` / ``frames`` of the registry; None = all),
-    the grid (``"group.field"`` → values tried instead of the default), the knobs' neutral values
-    (the check switched off; tried too) and the adoption rule's margins."""
+    """The pipeline config plus which frames, the grid of values tried and the adoption rule's margins.
+
+    Attributes:
+        datasets: the registry's datasets scored (conf/datasets.yaml; None = all).
+        frames: single frames of the registry scored instead (None = every frame of the datasets).
+        grid: ``{"group.field": [values]}`` tried instead of each default, one knob at a time.
+        neutral: ``{"group.field": value}`` that switches a check off; always tried (a removal candidate).
+        gallery: a folder: one picture of member 0 per frame (defaults); None = no pictures.
+        n_boot: bootstrap resamples of the adoption rule's interval.
+        workers: frames scored in this many processes (1 = in this one).
+        loss_margin: the largest drop of one dataset's hit rate a change may cost.
+        ni_margin: non-inferiority margin of a removal (and of the all-objects reading).
+        transforms: robustness checks: every frame transformed (``flip``, ``resample:F``, ``pole``, ``border``, ``specks``; experiments.scenes.add_junk) and scored with the defaults.
+    """
 
     datasets: Optional[list[str]] = None
     frames: Optional[list[str]] = None
@@ -158,6 +170,8 @@ class SceneCache:
         import matplotlib.pyplot as plt
         import numpy as np
 
+        from somtorch.viz import identified_percent
+
         if not 0 <= member < self.base.ensemble:
             raise ValueError(f"gallery member {member} must be in [0, ensemble={self.base.ensemble})")
         ground, members = self.members(overrides or {})
@@ -180,7 +194,7 @@ class SceneCache:
             ax.text(x0 + 3, y0 + 12, f"{a.confidence:.2f}" if a.confidence is not None else "", color="red",
                     fontsize=9, weight="bold")
         s = m.score
-        verdict = (f"identified {s.identified_fraction:.0%}, reduction {s.reduction_union:.1f} % "
+        verdict = (f"identified {identified_percent(s.identified_fraction)}, reduction {s.reduction_union:.1f} % "
                    f"(x_opt {s.x_opt:.1f} %): {'useful' if s.useful_hit else 'not useful'}"
                    + (", no object (whole map kept)" if m.no_object else ""))
         ax.set_title(f"{self.spec.name} (seed {m.seed}) — {verdict}\nred: kept boxes (confidence); "
@@ -199,7 +213,7 @@ def _score_frame(job: tuple) -> dict[str, dict[str, Any]]:
     import torch
 
     torch.set_num_threads(threads)
-    from experiments.datasets import load_frame
+    from .datasets import load_frame
 
     cache = SceneCache(spec, load_frame(spec, data_dir), base)
     for ov, sal in keys:
@@ -212,7 +226,7 @@ class Protocol:
 
     def __init__(self, caches: list[SceneCache], cfg: ValidateConfig, grid: dict[str, list[Any]],
                  defaults: dict[str, Any]) -> None:
-        from experiments.protocol import FrameTable
+        from .protocol import FrameTable
 
         self.caches, self.cfg, self.grid, self.defaults = caches, cfg, grid, defaults
         self.table = FrameTable([c.spec.dataset for c in caches], [c.spec.group for c in caches],
@@ -224,7 +238,7 @@ class Protocol:
 
     def decide(self, cand: dict[str, Any], base: dict[str, Any], table: Any = None) -> Any:
         """:func:`experiments.protocol.decide` of ``cand`` against ``base`` on ``table`` (default: all)."""
-        from experiments.protocol import decide
+        from .protocol import decide
 
         t = table or self.table
         sel = getattr(t, "index", slice(None))
@@ -278,8 +292,8 @@ def _default_of(cfg: Any, key: str) -> Any:
 
 def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     """Run the protocol of the module docstring; returns the JSON-ready report."""
-    from experiments.datasets import frames, load_frame
-    from experiments.scenes import check_junk_kind
+    from .datasets import frames, load_frame
+    from .scenes import check_junk_kind
 
     for kind in cfg.transforms:  # before any work: a typo must not cost the whole protocol
         check_junk_kind(kind)
@@ -297,7 +311,7 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     defaults = {k: _default_of(base, k) if "+" not in k else [_default_of(base, n) for n in k.split("+")]
                 for k in grid}
     keys = [({}, True)] + [(_overrides(k, v, defaults), False) for k, values in grid.items() for v in values]
-    from experiments.run import check_resources
+    from .run import check_resources
 
     upstream = 1 + sum(len(v) for k, v in grid.items() if k.split(".")[0] in UPSTREAM)
 
@@ -418,7 +432,7 @@ def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]
     by scene name. A transform is a check of the rule (a mirrored or resampled scene is as easy
     as the original; a pole in front of the object is a failure class), not a tuning scene: the
     folds never see it. Scenes already resampled are skipped by a resampling transform."""
-    from experiments.scenes import add_junk
+    from .scenes import add_junk
 
     out = {}
     for c in caches:
@@ -500,10 +514,10 @@ ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="validate")
 def main(dcfg: DictConfig) -> int:
-    from experiments.cli import configure_threads, interruptible, marked_if_failed
+    from .cli import configure_threads, interruptible, marked_if_failed
 
     configure_threads()
-    from experiments.schema import one_line_errors
+    from .schema import one_line_errors
     from somtorch.atomic import write_staged
 
     out = Path(HydraConfig.get().runtime.output_dir)
@@ -521,7 +535,7 @@ def main(dcfg: DictConfig) -> int:
 register()
 def cli() -> None:
     """Console entry: the overrides are checked against the schema first ("did you mean")."""
-    from experiments.cli import run_checked
+    from .cli import run_checked
 
     run_checked(main, ValidateConfig)
 

@@ -37,7 +37,8 @@ from .tasks.reduction import Reduction, reduce_map, valid_integral
 from .tasks.scoring import Score, optimal_reduction, score_reduction
 
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
-           "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig", "run_pipeline"]
+           "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig", "detect", "map_stride",
+           "run_pipeline", "train_stride"]
 DETERMINISTIC_METHODS = tuple(n for n, s in SEGMENTERS.items() if s.deterministic)
 log = logging.getLogger("somtorch.pipeline")
 

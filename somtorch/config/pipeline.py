@@ -118,7 +118,15 @@ class PipelineConfig(Validated):
     its groups, ``ensemble`` members (seeds ``seed … seed + ensemble − 1``), the scored
     ``object_id`` (None = the scene's main object(s)) and the torch ``device`` the SOM trains and
     labels the pixels on (``"cpu"``, ``"cuda"``, ``"cuda:1"``, ``"mps"``; the object step runs on
-    the CPU)."""
+    the CPU).
+
+    Attributes:
+        method: the segmenter of step 1b ("som"; baselines: see somtorch.segmenters.SEGMENTERS).
+        ensemble: SOMs trained at once, one per seed (seed, seed + 1, ...).
+        seed: seed of the first member.
+        object_id: the scored object id of the scene's mask (None = the scene's main object(s)).
+        device: torch device the SOM trains and labels pixels on ("cpu", "cuda", "cuda:1", "mps").
+    """
 
     _constraints: ClassVar[dict[str, Any]] = {
         "method": Choice(options.METHODS), "ensemble": POSITIVE_INT,

@@ -139,6 +139,15 @@ class BaselineConfig(Validated):
     ``n_segments`` (SLIC) None = the SOM's K = rows·cols, so every method splits the map into about
     as many segments; k-means always uses K centres. ``fz_*``: Felzenszwalb's scale, smoothing and
     minimum segment size in px; ``slic_compactness`` suits a [0, 1] disparity image.
+
+    Attributes:
+        kmeans_iterations: Lloyd iterations of method=kmeans.
+        kmeans_init: "kmeans++" or "sample" (K random pixels).
+        n_segments: SLIC's segment count (None = the SOM's K = rows x cols).
+        slic_compactness: SLIC's colour/space trade-off, for a [0, 1] disparity image.
+        fz_scale: Felzenszwalb's scale (larger = larger segments).
+        fz_sigma: Felzenszwalb's Gaussian smoothing before segmenting.
+        fz_min_size: Felzenszwalb's minimum segment size in px.
     """
 
     _group: ClassVar[str] = "baseline"

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import torch
@@ -28,6 +29,7 @@ from .decay import DecayFn, schedule
 from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search
 from .native import native_accumulate, native_online
 from .neighborhood import NeighborhoodFn, gaussian
+from .threads import kernel_threads
 
 log = logging.getLogger(__name__)
 
@@ -118,13 +120,42 @@ class Order:
         while pos < stop:
             epoch, off = divmod(pos, self.n)
             if epoch != self._epoch:
-                self._perm = torch.stack([torch.randperm(self.n, generator=g, device=self.device)
-                                          for g in self.generators])  # (E, N)
+                # int32 on the CPU where N allows: the same permutations as int64 (torch's CPU
+                # Fisher–Yates does not depend on the dtype), half the memory traffic
+                dtype = torch.int32 if self.device.type == "cpu" and self.n < 2 ** 31 else torch.long
+                self._perm = _permutations(self.generators, self.n, dtype, self.device)  # (E, N)
                 self._epoch = epoch
             take = min(stop - pos, self.n - off)
             parts.append(self._perm[:, off:off + take])
             pos += take
-        return torch.cat(parts, dim=1)
+        return torch.cat(parts, dim=1).long()
+
+
+PERM_THREAD_ELEMENTS = 1 << 20  # E·N from which the members' permutations are drawn on several threads
+
+
+def _permutations(generators: list[torch.Generator], n: int, dtype: torch.dtype,
+                  device: torch.device) -> torch.Tensor:
+    """One ``randperm(n)`` per generator, each drawn into its row of an ``(E, n)`` table.
+
+    On the CPU, large tables are drawn by ``kernel_threads()`` Python threads (torch releases the
+    GIL inside ``randperm``); each row still comes from its own generator alone, so the table is
+    the same whatever the thread count.
+    """
+    out = torch.empty(len(generators), n, dtype=dtype, device=device)
+    jobs = list(zip(generators, out))
+
+    def draw(job: tuple[torch.Generator, torch.Tensor]) -> None:
+        torch.randperm(n, generator=job[0], out=job[1])
+
+    workers = min(kernel_threads(), len(jobs)) if device.type == "cpu" and out.numel() >= PERM_THREAD_ELEMENTS else 1
+    if workers > 1:
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(draw, jobs))
+    else:
+        for job in jobs:
+            draw(job)
+    return out
 
 
 def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
@@ -138,19 +169,23 @@ def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
 
 # ----------------------------------------------------------------------------- update rules
 def online_block(weight: torch.Tensor, xs: torch.Tensor, lr: torch.Tensor, sigma: torch.Tensor,
-                 grid_d2: torch.Tensor, neighborhood: NeighborhoodFn) -> None:
+                 grid_d2: torch.Tensor, neighborhood: NeighborhoodFn, idx: torch.Tensor | None = None) -> None:
     """Apply the online rule for S consecutive steps, in place.
 
     Shape:
-        ``weight`` ``(E, K, D)``; ``xs`` ``(1 | E, S, D)``; ``lr``, ``sigma`` ``(S, E)``;
+        ``weight`` ``(E, K, D)``; ``xs`` ``(1 | E, S, D)`` — or, with ``idx`` ``(1 | E, S)``, the data
+        ``(N, D)`` or ``(E, N, D)`` whose rows ``idx`` the steps use; ``lr``, ``sigma`` ``(S, E)``;
         ``grid_d2`` ``(K, K)``.
     """
     if neighborhood is gaussian:
         # h = α exp(−d²/2σ²) = exp(log α + d² · (−1/2σ²)): two kernels per step instead of four
         coef = (-0.5 / (sigma * sigma)).unsqueeze(-1)  # (S, E, 1)
         log_lr = torch.log(lr).unsqueeze(-1)  # (S, E, 1)
-        if native_online(weight.data, xs, coef, log_lr, grid_d2):  # the compiled loop (CPU)
+        if native_online(weight.data, xs, coef, log_lr, grid_d2, idx):  # the compiled loop (CPU)
             return
+    if idx is not None:
+        xs = _take(xs, idx)  # (1 | E, S, D)
+    if neighborhood is gaussian:
         if weight.shape[0] == 1 and weight.device.type == "cpu":
             _online_solo_cpu(weight[0], xs[0], coef.view(-1), log_lr.view(-1), grid_d2)
             return
@@ -218,7 +253,11 @@ def batch_target(sums: torch.Tensor, counts: torch.Tensor, sigma: torch.Tensor, 
         ``sums`` ``(E, K, D)``, ``counts`` ``(E, K)``, ``sigma`` ``(E,)`` → target ``(E, K, D)`` and
         the denominator ``(E, K)`` (0 where no sample reaches the unit).
     """
-    h = neighborhood(grid_d2.unsqueeze(0), sigma.view(-1, 1, 1))  # (E, K, K), symmetric
+    e = sigma.shape[0]
+    if e > 1 and bool((sigma == sigma[0]).all()):  # one radius for the ensemble: one (K, K) table
+        h = neighborhood(grid_d2.unsqueeze(0), sigma[:1].view(1, 1, 1)).expand(e, -1, -1)  # (E, K, K)
+    else:
+        h = neighborhood(grid_d2.unsqueeze(0), sigma.view(-1, 1, 1))  # (E, K, K), symmetric
     # one batched matrix product for numerators and denominators (the counts ride along as an
     # extra column): no (E, K, K, D) intermediate, so a 16 x 16 ensemble costs what its members
     # do; every member is its own product of the batch, so member e equals the solo map bitwise
@@ -394,8 +433,8 @@ def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int
             for start, stop in _blocks(steps, block, cut_every if callback is not None else None):
                 lr, sigma = sched.values(offset + start, offset + stop, planned)  # (S, E)
                 if mode == "online":
-                    xs = _take(x, order.indices(offset + start, offset + stop))
-                    online_block(weight, xs, lr, sigma, grid_d2, neighborhood)
+                    idx = order.indices(offset + start, offset + stop)  # (1 | E, S)
+                    online_block(weight, x, lr, sigma, grid_d2, neighborhood, idx)
                 elif mode == "batch":
                     left = planned - offset - start  # epochs left in the schedule, this one included
                     skipped.append(batch_epoch(weight, x, sigma[0], grid_d2, neighborhood, left))

@@ -173,7 +173,7 @@ def load_frame(family: str, seed: int, camera: str = "oakd", version: str = "gt"
 
     ``version``: ``"gt"`` (``disp0GT.pfm``) or ``"sgbm"`` (``disp_sgbm.pfm``).
     """
-    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity import load_scene
     from somtorch.validation import check_choice
 
     check_choice("version", version, VERSIONS)

@@ -6,7 +6,7 @@ import math
 
 import torch
 
-from somtorch.disparity.scene import load_scene
+from somtorch.disparity import load_scene
 from somtorch.synth import ensure_frame, generate_frame, load_frame, write_frame
 from somtorch.synth.store import dataset_dir, generator_version, read_manifest
 
