@@ -171,7 +171,7 @@ def help_text(name: str, argv0: str | None = None) -> str:
     lines += ["", "paths.* (PathsConfig):"] + _fields(PathsConfig, "paths.")
     sections = [("features", C.FeatureConfig), ("som", C.SOMConfig), ("train", C.TrainConfig),
                 ("ground", C.GroundConfig), ("objects", C.AreaConfig), ("reduction", C.ReductionConfig),
-                ("output", C.OutputConfig), ("baseline", C.BaselineConfig)]
+                ("output", C.OutputConfig), ("baseline", C.BaselineConfig), ("resources", C.ResourcesConfig)]
     if module == "video":
         sections.append(("sequence", C.WarmStartConfig))
     for prefix, cls in sections:

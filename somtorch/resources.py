@@ -21,8 +21,9 @@ is the memory *added* to the process that calls it (the imported libraries are a
 so it is compared with the memory still available: ``MemAvailable`` of ``/proc/meminfo``, capped by
 the cgroup limit (v2 ``memory.max − memory.current``, v1 ``memory.limit_in_bytes −
 memory.usage_in_bytes``). Measured on small real runs (``tests/test_resources.py``) the estimate is
-an upper bound of the measured peak RSS increase and at most 2.5× it once the job holds more than
-~200 MB (small jobs are dominated by the fixed allowance for allocator slack).
+an upper bound of the measured peak RSS increase and at most 2.5× it for whole pipeline runs that
+hold more than ~150 MB (labelling- and object-step-bound); the training term over-estimates the
+current batch engine (a shared neighbourhood table) several-fold on large grids.
 
 Times are rough (order of magnitude, per-element costs measured on a 2-core CPU with the native
 kernel): they refuse the absurd (``train.epochs=1000000000``), not the merely long.
@@ -114,7 +115,10 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
     else:
         weights = e * k * (d + 1) * 4 * 4  # weights, sums, target, the product's input
         if mode == "batch":
-            train_b = weights + e * k * k * 4 * 3  # the neighbourhood's (E, K, K) and its temporaries
+            # the neighbourhood's (E, K, K) and its temporaries, or the BMU bounds' (E, K, K) float64
+            # unit distances (somtorch.core.bounds): an upper bound, 5-30x the measured peak of the
+            # shared-table engine on a 32 x 32 grid (tests/test_resources.py)
+            train_b = weights + e * k * k * 4 * 3
             train_s = epochs * (e * nt * k * _T_BATCH + e * k * k * _T_KK + _T_EPOCH)
         elif mode == "minibatch":
             steps = max(1, epochs * nt // batch_size)

@@ -99,7 +99,13 @@ class WarmStartConfig(Validated):
 class ResourcesConfig(Validated):
     """The check before any work (:mod:`somtorch.resources`): a job whose estimated peak memory
     exceeds ``max_memory_frac`` of the memory available, or whose estimated time exceeds
-    ``max_hours``, is refused with one line; ``check=False`` skips the check."""
+    ``max_hours``, is refused with one line.
+
+    Attributes:
+        check: estimate memory and time before any work and refuse what exceeds the budget (False: skip).
+        max_memory_frac: the memory budget, as a share of the memory available (MemAvailable, cgroup limit).
+        max_hours: the time budget in hours (the estimate is rough: it refuses the absurd).
+    """
 
     _group: ClassVar[str] = "resources"
     _constraints: ClassVar[dict[str, Any]] = {
