@@ -31,9 +31,11 @@ if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
 
     maybe_print_help("validate")
 
+import json
 import logging
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, Optional
 
@@ -76,6 +78,8 @@ class ValidateConfig(RunConfig):
     gallery: Optional[str] = None  # a folder: one picture of member 0 per frame (defaults)
     n_boot: int = 2000
     workers: int = 2  # frames scored in this many processes (1 = in this one)
+    scores_out: Optional[str] = None  # write the per-frame scores of every candidate here (JSON) ...
+    resume: Optional[str] = None  # ... and read them back instead of scoring again
     loss_margin: float = 0.10  # the largest drop of one dataset's hit rate a change may cost
     ni_margin: float = 0.02  # non-inferiority margin of a removal (and of the all-objects reading)
     # robustness: every frame transformed (experiments.scenes.add_junk: "flip", "resample:F",
@@ -311,40 +315,48 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     defaults = {k: _default_of(base, k) if "+" not in k else [_default_of(base, n) for n in k.split("+")]
                 for k in grid}
     keys = [({}, True)] + [(_overrides(k, v, defaults), False) for k, values in grid.items() for v in values]
+    specs = _scorable(specs, data_dir)  # every file read (and checked) before any training
     from .run import check_resources
 
     upstream = 1 + sum(len(v) for k, v in grid.items() if k.split(".")[0] in UPSTREAM)
 
     def jobs():  # one frame at a time: a segmentation per upstream setting, an object step per candidate
         for spec in specs:
-            scene = load_frame(spec, data_dir)  # every file read (and checked) before any training
+            scene = load_frame(spec, data_dir)  # (read again: _scorable keeps no map in memory)
             yield scene, base, upstream
             yield scene, base, len(keys)
 
     check_resources(jobs(), cfg.resources, f"validation over {len(specs)} frames x {len(keys)} candidates")
     t0 = time.perf_counter()
+    resumed = json.loads(Path(cfg.resume).read_text()) if cfg.resume else {}
     progress = _progress(len(specs))
-    if cfg.workers > 1 and len(specs) > 1:
+    caches = [SceneCache(s, None, base, loader=partial(load_frame, s, data_dir)) for s in specs]
+    todo = []
+    for i, c in enumerate(caches):
+        if all(_key(ov) in resumed.get(c.spec.name, {}) for ov, _ in keys):
+            c.scores = resumed[c.spec.name]
+            progress.update(1)
+        else:
+            todo.append(i)
+    if cfg.workers > 1 and len(todo) > 1:
         # frames in worker processes (one thread each); the scores come back, the segmentations do
         # not: a combination the choice needs later is segmented again here, deterministically
         import concurrent.futures as cf
         import multiprocessing as mp
-        from functools import partial
 
-        caches = [SceneCache(s, None, base, loader=partial(load_frame, s, data_dir)) for s in specs]
         with cf.ProcessPoolExecutor(cfg.workers, mp_context=mp.get_context("spawn")) as pool:
-            futures = {pool.submit(_score_frame, (s, base, keys, data_dir, 1)): i for i, s in enumerate(specs)}
+            futures = {pool.submit(_score_frame, (specs[i], base, keys, data_dir, 1)): i for i in todo}
             for fut in cf.as_completed(futures):
                 caches[futures[fut]].scores = fut.result()
                 progress.update(1)
     else:
-        scenes = [load_frame(s, data_dir) for s in specs]  # every file read before any training
-        caches = [SceneCache(spec, scene, base) for spec, scene in zip(specs, scenes)]
-        del scenes
-        for c in caches:
+        for i in todo:
             for ov, sal in keys:
-                c.score(ov, saliency=sal)
+                caches[i].score(ov, saliency=sal)
             progress.update(1)
+    if cfg.scores_out:  # the per-frame scores, so that a later run can resume from them
+        Path(cfg.scores_out).parent.mkdir(parents=True, exist_ok=True)
+        Path(cfg.scores_out).write_text(json.dumps({c.spec.name: c.scores for c in caches}))
     progress.close()
     log.info("%d frames scored with %d candidates in %.0f s", len(caches), len(keys), time.perf_counter() - t0)
     proto = Protocol(caches, cfg, grid, defaults)
@@ -383,6 +395,27 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
             "candidates": {c.spec.name: {k: {m: v[m] for m in ("runs", "useful_hits", "all_objects_hits")}
                                          for k, v in c.scores.items()} for c in caches},
             "robustness": robustness, "wall_s": time.perf_counter() - t0}
+
+
+def _scorable(specs: list[Any], data_dir: Path) -> list[Any]:
+    """The frames whose main object has a valid disparity pixel (an SGBM map may have none on a
+    textureless object: such a frame cannot be scored, and is left out with a warning)."""
+    from .datasets import load_frame
+
+    out, dropped = [], []
+    for s in specs:
+        scene = load_frame(s, data_dir)
+        main = scene.main_object_mask
+        if main is None or not bool((main & scene.valid).any()):
+            dropped.append(s.name)
+        else:
+            out.append(s)
+    if dropped:
+        log.warning("%d frame(s) left out: no main object or no valid disparity on it: %s", len(dropped),
+                    ", ".join(dropped))
+    if not out:
+        raise ValueError("no frame can be scored")
+    return out
 
 
 def _progress(total: int) -> Any:
