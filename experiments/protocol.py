@@ -16,7 +16,9 @@ The rule (``decide``), for a candidate against the defaults on the same frames a
   losing more than ``loss_margin`` — is not needed and is **removed**.
 
 The bootstrap resamples, within each dataset, its groups (the underlying scenes: a GT and an SGBM
-version of one scene move together) with replacement; the per-dataset means are then averaged.
+version of one scene move together) with replacement; the per-dataset means are then averaged. A
+dataset of a single scene resamples its frames instead (else it would carry no uncertainty, and a
+change of one of its frames would look certain).
 A fix that helps one failure class and harms none has small paired variance, so its interval
 clears zero even when the class is a few frames of one dataset.
 """
@@ -56,8 +58,13 @@ class FrameTable:
         for d in self.names:
             idx = np.flatnonzero(np.array(self.datasets) == d)
             gnames = list(dict.fromkeys(self.groups[i] for i in idx))
+            if len(gnames) < 2:  # one scene (in several versions): its frames are the units, else
+                gnames = [str(i) for i in idx]  # the dataset would count as certain, whatever it shows
+                g_names_of = dict(zip(idx.tolist(), gnames))
+            else:
+                g_names_of = {int(i): self.groups[i] for i in idx}
             # (frames of d) -> group index; a group's value is the mean of its frames
-            g_of = np.array([gnames.index(self.groups[i]) for i in idx])
+            g_of = np.array([gnames.index(g_names_of[int(i)]) for i in idx])
             draws = rng.integers(0, len(gnames), size=(self.n_boot, len(gnames)))
             counts = np.zeros((self.n_boot, len(gnames)))
             np.add.at(counts, (np.repeat(np.arange(self.n_boot), len(gnames)), draws.ravel()), 1.0)

@@ -64,6 +64,16 @@ def test_a_dataset_losing_more_than_the_margin_blocks_adoption_even_with_a_clear
     assert any("syn loses" in r for r in d.reasons)
 
 
+def test_a_gain_in_one_frame_of_a_one_scene_dataset_is_not_certain():
+    # dataset "k" holds one scene in two versions (one group): its frames become the units
+    t = FrameTable(["k", "k"] + ["m"] * 10, ["s", "s"] + [f"m{i}" for i in range(10)], [True] * 12, n_boot=2000)
+    base = np.full(12, 0.5)
+    cand = base.copy()
+    cand[0] += 0.2
+    d = decide(t, cand, base, cand, base)
+    assert d.useful[0] == pytest.approx(0.05) and d.useful[1] == 0.0 and not d.adopt, d
+
+
 def test_synthetic_gains_alone_are_evidence_not_the_verdict():
     t = _table({"a": 10, "syn": 10}, [True, False])
     base = np.full(20, 0.5)
