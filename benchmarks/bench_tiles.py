@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| **total** | **{tot[0]}** | | **{tot[1]}** | |")
     if not a.quick:
         from somtorch.disparity.resize import resize_scene
-        from somtorch.disparity.scene import load_scene
+        from somtorch.disparity import load_scene
 
         src = data / "middlebury2014" / "Motorcycle_Q"
         big = resize_scene(load_scene(src if src.is_dir() else "motorcycle"), 3840, 2160)

@@ -40,7 +40,7 @@ from somtorch.video import SequenceRunner, pan_sequence
 
 def base_scene(quick: bool):
     shared = common.REPO_ROOT.parent / "shared" / "data" / "middlebury2014" / "Motorcycle_Q"
-    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity import load_scene
 
     scene = load_scene(shared) if shared.is_dir() else load_scene("motorcycle")
     w, h = (316, 180) if quick else (1264, 720)

@@ -28,8 +28,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from experiments.metrics_schema import SCHEMA
-from experiments.study_sections import (STAGES, _config_name, _fmt, _median, executions_section,
+from .metrics_schema import SCHEMA
+from .study_sections import (STAGES, _config_name, _fmt, _median, executions_section,
                                         fit_power, grid_section, runtime_section, stability_section)
 
 __all__ = ["aggregate", "find_metrics", "fit_power", "main", "result_row", "timing_row"]
@@ -201,7 +201,7 @@ def aggregate(folders: list[Path], out: Path) -> dict[str, Path]:
                                                         "crops_x_max", "reduction_95_mean")} for r in rows
                                 if "identified_95" in r]))
         put("per_object.md", per_object_md(jobs))
-        from experiments.study_sections import tables_plot
+        from .study_sections import tables_plot
 
         for name in tables_plot(rows, out, PAPER_TABLE1, PAPER_TABLE2):
             written[name] = out / name
@@ -216,7 +216,9 @@ def aggregate(folders: list[Path], out: Path) -> dict[str, Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m experiments.aggregate", description=__doc__.split("\n\n")[0])
+    from .help import prog
+
+    p = argparse.ArgumentParser(prog=prog("aggregate"), description=__doc__.split("\n\n")[0])
     p.add_argument("folders", nargs="+", type=Path, help="sweep / run folders holding metrics.json files")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: the first folder)")
     args = p.parse_args(argv)

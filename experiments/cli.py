@@ -14,10 +14,9 @@ import dataclasses
 import difflib
 import sys
 import typing
-from pathlib import Path
 from typing import Any
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+from . import CONF  # the clone's conf/, or the one shipped in the wheel
 
 
 def field_types(schema: type, prefix: str = "") -> dict[str, Any]:

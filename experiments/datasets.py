@@ -20,7 +20,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Optional
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+from . import CONF  # the clone's conf/, or the one shipped in the wheel
+
 REGISTRY = CONF / "datasets.yaml"
 LABELS = CONF / "labels"
 
@@ -159,7 +160,7 @@ def _registry() -> tuple[DatasetSpec, ...]:
                 raise ValueError(f"{REGISTRY}: frame {f.name!r} in both {seen[f.name]!r} and {ds.name!r}")
             seen[f.name] = ds.name
             if f.junk is not None:
-                from experiments.scenes import check_junk_kind
+                from .scenes import check_junk_kind
 
                 try:
                     check_junk_kind(f.junk)
@@ -210,13 +211,13 @@ def load_frame(spec: FrameSpec, data_dir: str | Path, corpus: str | Path | None 
         FileNotFoundError: the folder is missing (for a synthetic frame: the message names the
             command that builds the corpus).
     """
-    from experiments.scenes import load_dev_scene
+    from .scenes import load_dev_scene
 
     if not spec.synthetic:
         return load_dev_scene(spec, data_dir)
     import dataclasses
 
-    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity import load_scene
 
     folder = Path(corpus or corpus_dir()) / spec.folder
     if not folder.is_dir():

@@ -34,7 +34,7 @@ def compose_config(overrides: list[str]):
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from experiments.run import CONF_DIR
+    from .run import CONF_DIR
 
     if not any(o.startswith("train.parallel=") for o in overrides):
         overrides = [*overrides, "train.parallel=data"]
@@ -46,11 +46,11 @@ def compose_config(overrides: list[str]):
 def main(argv: list[str] | None = None) -> int:
     import torch.distributed as dist
 
-    from experiments.schema import one_line_errors
+    from .schema import one_line_errors
 
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s][rank %(rank)s][%(levelname)s] %(message)s")
     _from_slurm(os.environ)
-    from experiments.cli import configure_threads
+    from .cli import configure_threads
 
     configure_threads()  # the local ranks share the node's cores
     rank_env = os.environ.get("RANK")
@@ -91,7 +91,7 @@ def _from_slurm(env) -> None:
 def _run(cfg, cfg_dict, dist) -> int:
     from hydra.utils import to_absolute_path
 
-    from experiments.run import execute, load_input
+    from .run import execute, load_input
     from somtorch.atomic import exclusive_folder
     from somtorch.pipeline import run_pipeline
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import importlib
 
-from experiments.help import maybe_print_help
+from .help import maybe_print_help
 
 
 def _go(module: str) -> None:
     maybe_print_help(module)
-    importlib.import_module(f"experiments.{module}").cli()
+    importlib.import_module(f".{module}", __package__).cli()
 
 
 def run() -> None:
@@ -30,3 +30,7 @@ def scenes() -> None:
 
 def video() -> None:
     _go("video")
+
+
+def synth() -> None:
+    _go("synth")

@@ -12,7 +12,7 @@ import re
 import sys
 from pathlib import Path
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+from . import CONF  # the clone's conf/, or the one shipped in the wheel
 
 USAGE = {
     "run": "the whole pipeline on one scene (outputs/run/<scene>/<time>/)",
@@ -20,14 +20,15 @@ USAGE = {
     "validate": "leave-one-scene-out validation of the object step's constants",
     "real_scenes": "the pipeline (and baselines) scored on named development scenes",
     "video": "a disparity sequence, each frame's SOM warm-started",
+    "synth": "generated stereo frames (GT + SGBM) into the cache (docs/synth.md)",
 }
 
 
-def _descriptions(cls: type) -> dict[str, str]:
-    """``{field: first sentence}`` from the ``Attributes:`` section of a class docstring, or (a
-    docstring in titled sections, like :class:`~somtorch.config.AreaConfig`'s) from every
-    ``name: text`` entry of it."""
-    doc = cls.__doc__ or ""
+def _descriptions(cls: type | str | None) -> dict[str, str]:
+    """``{field: first sentence}`` from the ``Attributes:`` section of a class docstring (or the
+    docstring itself), or (a docstring in titled sections, like :class:`~somtorch.config.AreaConfig`'s)
+    from every ``name: text`` entry of it."""
+    doc = (cls if isinstance(cls, str) else getattr(cls, "__doc__", None)) or ""
     out: dict[str, str] = {}
     body = doc.split("Attributes:", 1)[1] if "Attributes:" in doc else doc
     current: list[str] = []
@@ -62,34 +63,120 @@ def _fields(cls: type, prefix: str) -> list[str]:
     return lines
 
 
-def help_text(name: str) -> str:
+def prog(module: str, argv0: str | None = None) -> str:
+    """The command the user typed: the console script (``somtorch-run``) or ``python -m <package>.<module>``."""
+    name = Path(sys.argv[0] if argv0 is None else argv0).name
+    if not name or name.endswith(".py") or name in ("-c", "-m", "__main__.py"):
+        return f"python -m {__package__}.{module}"
+    return name
+
+
+class _Literal(str):
+    """A default as written in the source (its repr is itself)."""
+
+    def __repr__(self) -> str:
+        return str(self)
+
+
+def _yaml_comments(text: str) -> dict[str, str]:
+    """``{top-level key: its trailing comment}`` of a YAML file."""
+    return {m.group(1): m.group(2).strip() for m in re.finditer(r"^([a-z_]+):[^#\n]*#(.*)$", text, re.M)}
+
+
+def _own_fields(module: str) -> list[tuple[str, str, str]]:
+    """``[(key, default, description)]`` of the fields the experiment's schema class (the class of
+    ``experiments/<module>.py`` derived from ``RunConfig``) adds, read from its source without
+    importing it (that would import torch and Hydra); a nested dataclass of the same file gives
+    ``name.field`` keys. The description: the class docstring's ``Attributes:`` entry, else the
+    field's trailing comment."""
+    import ast
+
+    path = Path(__file__).with_name(f"{module}.py")
+    if not path.is_file():
+        return []
+    text = path.read_text()
+    lines = text.splitlines()
+    classes = {n.name: n for n in ast.parse(text).body if isinstance(n, ast.ClassDef)}
+
+    def fields(node: ast.ClassDef, prefix: str) -> list[tuple[str, str, str]]:
+        desc = _descriptions(ast.get_docstring(node))
+        out = []
+        for st in node.body:
+            if not (isinstance(st, ast.AnnAssign) and isinstance(st.target, ast.Name)):
+                continue
+            name, ann = st.target.id, ast.unparse(st.annotation)
+            if ann in classes:
+                out += fields(classes[ann], f"{prefix}{name}.")
+                continue
+            default = "???" if st.value is None else ast.unparse(st.value)
+            if default.startswith("field(default_factory="):
+                default = {"list": "[]", "dict": "{}"}.get(default[len("field(default_factory="):-1], default)
+            comment = lines[st.lineno - 1].split("#", 1)[1].strip() if "#" in lines[st.lineno - 1] else ""
+            out.append((prefix + name, default, desc.get(name) or comment))
+        return out
+
+    own = [c for c in classes.values() if any(ast.unparse(b) == "RunConfig" for b in c.bases)]
+    return fields(own[0], "") if own else []
+
+
+def help_text(name: str, argv0: str | None = None) -> str:
     from somtorch import config as C
 
-    from experiments.cli import config_groups
+    from .cli import config_groups
+    from .data_schema import DataSource, PathsConfig
 
     groups = config_groups()
     module = "real_scenes" if name == "scenes" else name
-    lines = [f"python -m experiments.{module} [group=option ...] [key=value ...]",
+    if module == "synth":  # not a pipeline run: its own keys only
+        from .synth_config import SynthConfig
+
+        return "\n".join([f"{prog(module, argv0)} [key=value ...]", f"  {USAGE['synth']}", "",
+                          "Keys (SynthConfig):"] + _fields(SynthConfig, ""))
+    lines = [f"{prog(module, argv0)} [group=option ...] [key=value ...]",
              f"  {USAGE.get(module, '')}", "",
              "Config groups (group=option; '+preset=paper' and '+experiment=...' add one):"]
     for g, opts in groups.items():
         lines.append(f"  {g}: {', '.join(opts)}")
+    # top-level keys: the pipeline's own (method, ensemble, seed, object_id, device), label, and what
+    # the experiment's YAML adds; a value the YAML sets replaces the dataclass default
     own = CONF / f"{module}.yaml"
+    doc, comments = {}, {}
     if own.is_file():
         import yaml
 
-        doc = yaml.safe_load(own.read_text()) or {}
-        top = {k: v for k, v in doc.items() if k not in ("defaults", "hydra")}
-        if top:
-            lines += ["", f"Top-level keys of conf/{module}.yaml:"]
-            lines += [f"  {k}={v!r}" for k, v in top.items()]
+        text = own.read_text()
+        doc = {k: v for k, v in (yaml.safe_load(text) or {}).items()
+               if k not in ("defaults", "hydra") and not isinstance(v, dict)}
+        comments = _yaml_comments(text)
+    desc = {**_descriptions(C.PipelineConfig), "label": "a name for the configuration (set by presets; shown in tables)."}
+    top = {f.name: f.default for f in dataclasses.fields(C.PipelineConfig)
+           if not f.name.startswith("_") and f.default is not dataclasses.MISSING}
+    top["label"] = "robust"
+    own_fields = _own_fields(module)
+    nested = [f for f in own_fields if "." in f[0]]
+    for key, default, d in own_fields:
+        if "." not in key:
+            top[key] = _Literal(default)
+            desc[key] = d
+    top.update(doc)
+    lines += ["", "Top-level keys:"]
+    for k, v in top.items():
+        d = desc.get(k) or comments.get(k, "")
+        lines.append(f"  {k}={v!r}" + (f"  — {d}" if d else ""))
+    lines += ["", "data.* (where the disparity comes from; conf/data/<option>.yaml sets them):"]
+    lines += _fields(DataSource, "data.")
+    lines.append("  data.sgbm.<name>  — StereoSGBM setting under OpenCV's name (somtorch.disparity.stereo.SGBMParams:"
+                 " minDisparity, numDisparities, blockSize, P1, P2, disp12MaxDiff, uniquenessRatio,"
+                 " speckleWindowSize, speckleRange, mode), e.g. data.sgbm.numDisparities=64")
+    lines += ["", "paths.* (PathsConfig):"] + _fields(PathsConfig, "paths.")
     sections = [("features", C.FeatureConfig), ("som", C.SOMConfig), ("train", C.TrainConfig),
                 ("ground", C.GroundConfig), ("objects", C.AreaConfig), ("reduction", C.ReductionConfig),
-                ("output", C.OutputConfig)]
+                ("output", C.OutputConfig), ("baseline", C.BaselineConfig)]
     if module == "video":
         sections.append(("sequence", C.WarmStartConfig))
     for prefix, cls in sections:
         lines += ["", f"{prefix}.* ({cls.__name__}):"] + _fields(cls, prefix + ".")
+        lines += [f"  {k}={v}" + (f"  — {d}" if d else "") for k, v, d in nested if k.startswith(prefix + ".")]
     lines += ["", "Every key, resolved: --cfg job.  Hydra's own help: --hydra-help.",
               "Docs: README.md, docs/ (validation, scaling, tuned_constants, reliability, results)."]
     return "\n".join(lines)
@@ -99,5 +186,10 @@ def maybe_print_help(name: str, argv: list[str] | None = None) -> None:
     """Print the help and exit 0 when ``-h`` / ``--help`` is among the arguments."""
     args = sys.argv[1:] if argv is None else argv
     if "--help" in args or "-h" in args:
-        print(help_text(name))
+        try:
+            print(help_text(name, sys.argv[0] if argv is None else None), flush=True)
+        except BrokenPipeError:  # `--help | head`: the reader has seen enough
+            import os
+
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         raise SystemExit(0)

@@ -27,7 +27,7 @@ against the union of the labelled objects, :mod:`somtorch.saliency_metrics`), me
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from experiments.help import maybe_print_help
+    from .help import maybe_print_help
 
     maybe_print_help("real_scenes")
 
@@ -43,11 +43,12 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.datasets import frames, load_frame
-from experiments.schema import RunConfig
+from . import CONF
+from .datasets import frames, load_frame
+from .schema import RunConfig
 
 # absolute, so that the console script and python -m find the same configs from any directory
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = str(CONF)
 SCHEMA = "somtorch.scenes/1"
 log = logging.getLogger("somtorch.real_scenes")
 
@@ -229,10 +230,10 @@ def to_markdown(results: dict[str, Any]) -> str:
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="real_scenes")
 def main(dcfg: DictConfig) -> dict:
-    from experiments.cli import configure_threads
+    from .cli import configure_threads
 
     configure_threads()
-    from experiments.schema import one_line_errors
+    from .schema import one_line_errors
     from somtorch.atomic import write_staged
 
     with one_line_errors(log):
@@ -246,7 +247,7 @@ def main(dcfg: DictConfig) -> dict:
 
 def cli() -> None:
     """Console entry: the overrides are checked against the schema first ("did you mean")."""
-    from experiments.cli import run_checked
+    from .cli import run_checked
 
     run_checked(main, ScenesConfig)
 

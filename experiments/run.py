@@ -15,7 +15,7 @@ Examples::
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from experiments.help import maybe_print_help
+    from .help import maybe_print_help
 
     maybe_print_help("run")
 
@@ -31,10 +31,11 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.schema import RunConfig, register
+from . import CONF
+from .schema import RunConfig, register
 
 # absolute, so that the console script and python -m find the same configs from any directory
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = str(CONF)
 log = logging.getLogger("somtorch.run")
 register()
 
@@ -43,7 +44,7 @@ def load_input(cfg: RunConfig):
     """The scene named by ``cfg.data`` (every check on the files happens here, before any work)."""
     from somtorch.disparity.io import read_image
     from somtorch.disparity.camera import read_calibration
-    from somtorch.disparity.scene import Camera, load_scene
+    from somtorch.disparity import Camera, load_scene
     from somtorch.disparity.stereo import SGBMParams, load_stereo_pair
 
     d = cfg.data
@@ -65,6 +66,14 @@ def load_input(cfg: RunConfig):
                             baseline_unit=d.baseline_unit, doffs=d.doffs)
         return load_stereo_pair(left_path, right_path, SGBMParams(**dataclasses.asdict(d.sgbm)), camera=camera,
                                 name=d.name or Path(d.left).stem)
+    if d.family is not None:  # a generated frame (conf/data/synthetic.yaml), from the cache or made now
+        from somtorch.synth import load_frame
+
+        given = {"seed": d.seed, "camera": d.camera, "version": d.version}
+        scene = load_frame(d.family, **{k: v for k, v in given.items() if v is not None})
+        if d.name:
+            scene.name = d.name
+        return scene
     if d.source is None:
         raise ValueError("data.source is empty: give 'motorcycle', a scene folder or a disparity file")
     spec = d.source if d.source == "motorcycle" else to_absolute_path(d.source)
@@ -110,7 +119,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
             writer = SummaryWriter(str(stage / "tb"))
         from tqdm.auto import tqdm
 
-        from experiments.cli import show_progress
+        from .cli import show_progress
 
         steps = ["pipeline"] + (["maps"] if cfg.output.maps else []) + (["point clouds"] if cfg.output.pointcloud else [])
         bar = tqdm(total=len(steps), desc=f"{scene.name}", unit="stage", disable=not show_progress(), leave=False)
@@ -179,14 +188,14 @@ def _log_hparams(writer, cfg: RunConfig, metrics: dict) -> None:
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="run")
 def main(dcfg: DictConfig) -> dict:
     """Hydra entry point."""
-    from experiments.cli import configure_threads
+    from .cli import configure_threads
 
     configure_threads()
-    from experiments.schema import one_line_errors
+    from .schema import one_line_errors
     from somtorch.atomic import exclusive_folder, exit_cleanly_on_sigterm
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    from experiments.cli import quiet
+    from .cli import quiet
 
     if quiet():  # the console shows warnings and errors only; run.log keeps everything
         for h in logging.getLogger().handlers:
@@ -209,7 +218,7 @@ def main(dcfg: DictConfig) -> dict:
 
 def cli() -> None:
     """Console entry: the overrides are checked against the schema first ("did you mean")."""
-    from experiments.cli import run_checked
+    from .cli import run_checked
 
     run_checked(main, RunConfig)
 

@@ -7,7 +7,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-LABELS = Path(__file__).resolve().parents[1] / "conf" / "labels"
+from . import CONF
+
+LABELS = CONF / "labels"
 
 
 def load_dev_scene(spec: Any, data_dir: str | Path) -> Any:
@@ -26,7 +28,7 @@ def load_dev_scene(spec: Any, data_dir: str | Path) -> Any:
 
 def _load(spec: Any, data_dir: Path) -> Any:
     from somtorch.disparity.io import read_image
-    from somtorch.disparity.scene import load_scene, scene_from_arrays
+    from somtorch.disparity import load_scene, scene_from_arrays
     from somtorch.disparity.stereo import SGBMParams, compute_disparity
 
     path = data_dir / spec.folder

@@ -23,7 +23,7 @@ same command skips every job whose ``metrics.json`` is complete and was made by 
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from experiments.help import maybe_print_help
+    from .help import maybe_print_help
 
     maybe_print_help("study")
 
@@ -44,9 +44,9 @@ from hydra.core.config_store import ConfigStore
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.run import CONF_DIR, load_input
-from experiments.schema import RunConfig, register
-from experiments.metrics_schema import SCHEMA, config_hash
+from .run import CONF_DIR, load_input
+from .schema import RunConfig, register
+from .metrics_schema import SCHEMA, config_hash
 from somtorch.atomic import exit_cleanly_on_sigterm
 from somtorch.evaluation import merge_runs, per_object_scores, run_records, summarize_runs
 
@@ -132,7 +132,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
     try:
         from tqdm.auto import tqdm
 
-        from experiments.cli import show_progress
+        from .cli import show_progress
 
         repeats: list[dict[str, float]] = []
         results, per_run_s = [], None
@@ -252,7 +252,7 @@ def _write_tensorboard(writer, cfg: StudyConfig, metrics: dict[str, Any]) -> Non
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="study")
 def main(dcfg: DictConfig) -> float:
     """Hydra entry point; returns the job's objective (``summary.tradeoff``; 0 without an object mask)."""
-    from experiments.cli import configure_threads
+    from .cli import configure_threads
 
     configure_threads()
     cfg: StudyConfig = OmegaConf.to_object(dcfg)
@@ -264,7 +264,7 @@ def main(dcfg: DictConfig) -> float:
 
 def cli() -> None:
     """Console entry: the overrides are checked against the schema first ("did you mean")."""
-    from experiments.cli import run_checked
+    from .cli import run_checked
 
     run_checked(main, StudyConfig)
 

@@ -10,7 +10,7 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-from experiments.metrics_schema import config_hash
+from .metrics_schema import config_hash
 
 STAGES = ("clean", "ground", "features", "train", "segment", "objects", "reduction")
 
@@ -209,58 +209,103 @@ def _pyplot():
 
 
 def _finish(fig, path: Path) -> None:
-    """Lay out, write atomically as PNG and close a figure."""
+    """Lay out (unless the figure has its own layout engine), write atomically as PNG and close it."""
     from somtorch.atomic import atomic_path
 
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     _pyplot().close(fig)
 
 
+def _panel_grid(plt, n: int, title: str, ncols: int = 3):
+    """A figure of ``n`` panels, ``ncols`` a row (about 1650 px wide at the PNG's 110 dpi), the
+    rest hidden; shared y axis. Returns the figure and the first ``n`` axes."""
+    ncols = min(ncols, n)
+    nrows = -(-n // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.0 * ncols, 2.8 * nrows + 1.0), sharey=True, squeeze=False,
+                             layout="constrained")
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    fig.suptitle(title)
+    return fig, list(axes.flat[:n])
+
+
+def _by_scene(scored: list[dict]) -> dict[str, list[dict]]:
+    out: dict[str, list[dict]] = {}
+    for r in scored:
+        out.setdefault(r["scene"], []).append(r)
+    return out
+
+
 def tables_plot(rows: list[dict], out: Path, paper1: list[tuple], paper2: list[tuple]) -> list[str]:
     """``table1.png`` (runs identifying 100 % / ≥ 95 % of the object and useful hits, as a share
     of the runs, beside the paper's Table 1) and ``table2.png`` (reduction x_min … x_max with the
-    mean, and x_opt, beside the paper's Table 2). Returns the names written."""
+    mean, and x_opt, beside the paper's Table 2): one panel per scene (its configurations side by
+    side: mode and preset) and one for the paper, three panels a row. Returns the names written."""
     import numpy as np
 
     scored = [r for r in rows if "identified_95" in r]
     if not scored:
         return []
     plt = _pyplot()
-    labels = [f"{r['mode']} {r['scene']}\n{r['config']}" for r in scored]
+    scenes = _by_scene(scored)
     names = []
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.2 * (len(scored) + len(paper1))), 4.2))
-    x = np.arange(len(scored))
-    for j, (key, name) in enumerate([("identified_100", "100 % identified"), ("identified_95", "≥ 95 % identified"),
-                                     ("useful_hits", "useful hits")]):
-        ax.bar(x + (j - 1) * 0.27, [100.0 * r[key] / r["runs"] for r in scored], 0.27, label=name)
-    xp = np.arange(len(scored), len(scored) + len(paper1)) + 0.5
-    ax.bar(xp - 0.135, [a for _, a, _ in paper1], 0.27, color="0.55", label="paper: 100 %")
-    ax.bar(xp + 0.135, [b for _, _, b in paper1], 0.27, color="0.8", label="paper: 95 %")
-    ax.set_xticks(list(x) + list(xp), labels + [f"paper\n{n}" for n, _, _ in paper1], fontsize=8)
-    ax.set_ylabel("runs [% of the runs]")
-    ax.set_ylim(0, 105)
-    ax.set_title("Table 1: identification of the object (ours: this sweep; paper: its synthetic scenes)")
-    ax.legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.22), frameon=False)
+    keys = [("identified_100", "100 % identified"), ("identified_95", "≥ 95 % identified"),
+            ("useful_hits", "useful hits")]
+    fig, axes = _panel_grid(plt, len(scenes) + bool(paper1),
+                            "Table 1: runs identifying the object [% of the runs] (ours: this sweep; paper: its "
+                            "synthetic scenes)")
+    for ax, (scene, rs) in zip(axes, scenes.items()):
+        x = np.arange(len(rs))
+        for j, (key, name) in enumerate(keys):
+            ax.bar(x + (j - 1) * 0.27, [100.0 * r[key] / r["runs"] for r in rs], 0.27, color=f"C{j}", label=name)
+        ax.set_xticks(x, [f"{r['mode']} {r['config']}\n{r['runs']} runs" for r in rs], fontsize=8)
+        ax.set_title(scene, fontsize=10)
+    if paper1:
+        ax = axes[-1]
+        xp = np.arange(len(paper1))
+        ax.bar(xp - 0.135, [a for _, a, _ in paper1], 0.27, color="0.55", label="paper: 100 %")
+        ax.bar(xp + 0.135, [b for _, _, b in paper1], 0.27, color="0.8", label="paper: ≥ 95 %")
+        ax.set_xticks(xp, [n.replace(" ", "\n", 1) for n, _, _ in paper1], fontsize=8)
+        ax.set_title("paper (Table 1)", fontsize=10)
+    for ax in axes:
+        ax.set_ylim(0, 105)
+        ax.grid(axis="y", alpha=0.3)
+    for ax in axes[::3]:
+        ax.set_ylabel("% of the runs")
+    handles = {lab: h for ax in axes for h, lab in zip(*ax.get_legend_handles_labels())}
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=5, fontsize=9, frameon=False)
     _finish(fig, out / "table1.png")
     names.append("table1.png")
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.2 * (len(scored) + len(paper2))), 4.2))
-    for i, r in enumerate(scored):
-        if r.get("x_min") is not None:
-            ax.plot([i, i], [r["x_min"], r["x_max"]], color="C0", lw=2)
-            ax.plot(i, r["x_mean"], "o", color="C0", label="ours: x_min … x_max, mean" if i == 0 else None)
-        ax.plot(i, r["x_opt"], "k_", ms=18, mew=2, label="x_opt (exactly the object's box)" if i == 0 else None)
-    for j, (n, lo, mean, hi, opt) in enumerate(paper2):
-        i = len(scored) + j + 0.5
-        ax.plot([i, i], [lo, hi], color="0.5", lw=2)
-        ax.plot(i, mean, "o", color="0.5", label="paper: x_min … x_max, mean" if j == 0 else None)
-        ax.plot(i, opt, "_", color="0.3", ms=18, mew=2)
-    ax.set_xticks(list(range(len(scored))) + [len(scored) + j + 0.5 for j in range(len(paper2))],
-                  labels + [f"paper\n{n}" for n, *_ in paper2], fontsize=8)
-    ax.set_ylabel("reduction [%] (completely identified runs)")
-    ax.set_title("Table 2: data reduction")
-    ax.legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.22), frameon=False)
+
+    fig, axes = _panel_grid(plt, len(scenes) + bool(paper2),
+                            "Table 2: data reduction [%] of the completely identified runs")
+    for ax, (scene, rs) in zip(axes, scenes.items()):
+        for i, r in enumerate(rs):
+            if r.get("x_min") is not None:
+                ax.plot([i, i], [r["x_min"], r["x_max"]], color="C0", lw=2)
+                ax.plot(i, r["x_mean"], "o", color="C0", label="ours: x_min … x_max, mean")
+            ax.plot(i, r["x_opt"], "k_", ms=18, mew=2, label="x_opt (exactly the object's box)")
+        ax.set_xticks(range(len(rs)), [f"{r['mode']} {r['config']}" for r in rs], fontsize=8)
+        ax.set_xlim(-0.6, len(rs) - 0.4)
+        ax.set_title(scene, fontsize=10)
+    if paper2:
+        ax = axes[-1]
+        for j, (n, lo, mean, hi, opt) in enumerate(paper2):
+            ax.plot([j, j], [lo, hi], color="0.5", lw=2)
+            ax.plot(j, mean, "o", color="0.5", label="paper: x_min … x_max, mean")
+            ax.plot(j, opt, "_", color="0.3", ms=18, mew=2)
+        ax.set_xticks(range(len(paper2)), [n.replace(" ", "\n", 1) for n, *_ in paper2], fontsize=8)
+        ax.set_xlim(-0.6, len(paper2) - 0.4)
+        ax.set_title("paper (Table 2)", fontsize=10)
+    for ax in axes:
+        ax.grid(axis="y", alpha=0.3)
+    for ax in axes[::3]:
+        ax.set_ylabel("reduction [%]")
+    handles = {lab: h for ax in axes for h, lab in zip(*ax.get_legend_handles_labels())}
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=3, fontsize=9, frameon=False)
     _finish(fig, out / "table2.png")
     names.append("table2.png")
     return names

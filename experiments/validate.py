@@ -27,7 +27,7 @@ Writes ``validate.json`` (every per-frame figure, every decision, every fold's c
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from experiments.help import maybe_print_help
+    from .help import maybe_print_help
 
     maybe_print_help("validate")
 
@@ -44,18 +44,30 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.schema import RunConfig, register
+from . import CONF
+from .schema import RunConfig, register
 
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = str(CONF)
 log = logging.getLogger("somtorch.validate")
 UPSTREAM = ("features", "ground", "som", "train", "baseline", "method", "ensemble", "seed")
 
 
 @dataclass
 class ValidateConfig(RunConfig):
-    """The pipeline config plus which frames (``datasets`` / ``frames`` of the registry; None = all),
-    the grid (``"group.field"`` → values tried instead of the default), the knobs' neutral values
-    (the check switched off; tried too) and the adoption rule's margins."""
+    """The pipeline config plus which frames, the grid of values tried and the adoption rule's margins.
+
+    Attributes:
+        datasets: the registry's datasets scored (conf/datasets.yaml; None = all).
+        frames: single frames of the registry scored instead (None = every frame of the datasets).
+        grid: ``{"group.field": [values]}`` tried instead of each default, one knob at a time.
+        neutral: ``{"group.field": value}`` that switches a check off; always tried (a removal candidate).
+        gallery: a folder: one picture of member 0 per frame (defaults); None = no pictures.
+        n_boot: bootstrap resamples of the adoption rule's interval.
+        workers: frames scored in this many processes (1 = in this one).
+        loss_margin: the largest drop of one dataset's hit rate a change may cost.
+        ni_margin: non-inferiority margin of a removal (and of the all-objects reading).
+        transforms: robustness checks: every frame transformed (``flip``, ``resample:F``, ``pole``, ``border``, ``specks``; experiments.scenes.add_junk) and scored with the defaults.
+    """
 
     datasets: Optional[list[str]] = None
     frames: Optional[list[str]] = None
@@ -63,6 +75,7 @@ class ValidateConfig(RunConfig):
     neutral: dict[str, Any] = field(default_factory=dict)
     gallery: Optional[str] = None  # a folder: one picture of member 0 per frame (defaults)
     n_boot: int = 2000
+    workers: int = 2  # frames scored in this many processes (1 = in this one)
     loss_margin: float = 0.10  # the largest drop of one dataset's hit rate a change may cost
     ni_margin: float = 0.02  # non-inferiority margin of a removal (and of the all-objects reading)
     # robustness: every frame transformed (experiments.scenes.add_junk: "flip", "resample:F",
@@ -77,11 +90,18 @@ def _key(overrides: dict[str, Any]) -> str:
 class SceneCache:
     """One development scene: its segmentations per upstream setting, scores per candidate."""
 
-    def __init__(self, spec: Any, scene: Any, base: Any) -> None:
-        self.spec, self.scene, self.base = spec, scene, base
+    def __init__(self, spec: Any, scene: Any, base: Any, loader: Any = None) -> None:
+        self.spec, self._scene, self.base, self._loader = spec, scene, base, loader
         self._seg: dict[str, Any] = {}
         self._target: Any = None  # the scene's all-objects target, computed once
         self.scores: dict[str, dict[str, Any]] = {}
+
+    @property
+    def scene(self) -> Any:
+        """The frame's scene (loaded on first use when the cache was built from scores alone)."""
+        if self._scene is None:
+            self._scene = self._loader()
+        return self._scene
 
     def members(self, overrides: dict[str, Any]) -> tuple[Any, list]:
         """``(ground plane, member results)`` of the base config with ``overrides``; the segmentation
@@ -91,14 +111,14 @@ class SceneCache:
         import torch
 
         from somtorch.config import with_overrides
-        from somtorch.pipeline import detect, prepare
+        from somtorch.pipeline import detect, on_support, prepare
         from somtorch.segmenters import run_segmenter
 
         cfg = with_overrides(self.base, overrides)
         up = _key({k: v for k, v in overrides.items() if k.split(".")[0] in UPSTREAM})
         if up not in self._seg:
             valid, ground, usable, feats, train = prepare(self.scene, cfg)
-            seg = run_segmenter(feats, train, self.scene, usable, cfg)
+            seg = run_segmenter(feats, train, on_support(self.scene, ground, cfg.features)[0], usable, cfg)
             # kept as int16 (a SOM has far fewer neurons): 30 members x 22 scenes x every upstream
             # setting of the grid as int64 label maps outgrew 24 GiB
             small = seg.labels.to(torch.int16) if int(seg.labels.max()) < 2 ** 15 else seg.labels
@@ -150,6 +170,8 @@ class SceneCache:
         import matplotlib.pyplot as plt
         import numpy as np
 
+        from somtorch.viz import identified_percent
+
         if not 0 <= member < self.base.ensemble:
             raise ValueError(f"gallery member {member} must be in [0, ensemble={self.base.ensemble})")
         ground, members = self.members(overrides or {})
@@ -172,7 +194,7 @@ class SceneCache:
             ax.text(x0 + 3, y0 + 12, f"{a.confidence:.2f}" if a.confidence is not None else "", color="red",
                     fontsize=9, weight="bold")
         s = m.score
-        verdict = (f"identified {s.identified_fraction:.0%}, reduction {s.reduction_union:.1f} % "
+        verdict = (f"identified {identified_percent(s.identified_fraction)}, reduction {s.reduction_union:.1f} % "
                    f"(x_opt {s.x_opt:.1f} %): {'useful' if s.useful_hit else 'not useful'}"
                    + (", no object (whole map kept)" if m.no_object else ""))
         ax.set_title(f"{self.spec.name} (seed {m.seed}) — {verdict}\nred: kept boxes (confidence); "
@@ -185,12 +207,26 @@ class SceneCache:
         return path
 
 
+def _score_frame(job: tuple) -> dict[str, dict[str, Any]]:
+    """A worker's job: every candidate of ``keys`` (``[(overrides, saliency)]``) on one frame."""
+    spec, base, keys, data_dir, threads = job
+    import torch
+
+    torch.set_num_threads(threads)
+    from .datasets import load_frame
+
+    cache = SceneCache(spec, load_frame(spec, data_dir), base)
+    for ov, sal in keys:
+        cache.score(ov, saliency=sal)
+    return cache.scores
+
+
 class Protocol:
     """Per-frame rates of every scored candidate over one set of frame caches, and the choices."""
 
     def __init__(self, caches: list[SceneCache], cfg: ValidateConfig, grid: dict[str, list[Any]],
                  defaults: dict[str, Any]) -> None:
-        from experiments.protocol import FrameTable
+        from .protocol import FrameTable
 
         self.caches, self.cfg, self.grid, self.defaults = caches, cfg, grid, defaults
         self.table = FrameTable([c.spec.dataset for c in caches], [c.spec.group for c in caches],
@@ -202,7 +238,7 @@ class Protocol:
 
     def decide(self, cand: dict[str, Any], base: dict[str, Any], table: Any = None) -> Any:
         """:func:`experiments.protocol.decide` of ``cand`` against ``base`` on ``table`` (default: all)."""
-        from experiments.protocol import decide
+        from .protocol import decide
 
         t = table or self.table
         sel = getattr(t, "index", slice(None))
@@ -256,8 +292,8 @@ def _default_of(cfg: Any, key: str) -> Any:
 
 def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     """Run the protocol of the module docstring; returns the JSON-ready report."""
-    from experiments.datasets import frames, load_frame
-    from experiments.scenes import check_junk_kind
+    from .datasets import frames, load_frame
+    from .scenes import check_junk_kind
 
     for kind in cfg.transforms:  # before any work: a typo must not cost the whole protocol
         check_junk_kind(kind)
@@ -274,24 +310,34 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     base = cfg  # a ValidateConfig is a PipelineConfig: the extra fields do not reach the pipeline
     defaults = {k: _default_of(base, k) if "+" not in k else [_default_of(base, n) for n in k.split("+")]
                 for k in grid}
-    scenes = [load_frame(s, data_dir) for s in specs]  # every file read before any training
-    caches = [SceneCache(spec, scene, base) for spec, scene in zip(specs, scenes)]
-    del scenes
+    keys = [({}, True)] + [(_overrides(k, v, defaults), False) for k, values in grid.items() for v in values]
     t0 = time.perf_counter()
-    iterator = caches
-    try:
-        from tqdm import tqdm
+    progress = _progress(len(specs))
+    if cfg.workers > 1 and len(specs) > 1:
+        # frames in worker processes (one thread each); the scores come back, the segmentations do
+        # not: a combination the choice needs later is segmented again here, deterministically
+        import concurrent.futures as cf
+        import multiprocessing as mp
+        from functools import partial
 
-        iterator = tqdm(caches, desc="frames", unit="frame", disable=None)
-    except ImportError:  # pragma: no cover - tqdm is a dependency
-        pass
-    for c in iterator:
-        c.score({}, saliency=True)
-        for k, values in grid.items():
-            for v in values:
-                c.score(_overrides(k, v, defaults))
-        log.debug("%s: default %d useful of %d (%.1f s)", c.spec.name, c.scores["default"]["useful_hits"],
-                  c.scores["default"]["runs"], time.perf_counter() - t0)
+        for s in specs:  # every file checked before any training
+            load_frame(s, data_dir)
+        caches = [SceneCache(s, None, base, loader=partial(load_frame, s, data_dir)) for s in specs]
+        with cf.ProcessPoolExecutor(cfg.workers, mp_context=mp.get_context("spawn")) as pool:
+            futures = {pool.submit(_score_frame, (s, base, keys, data_dir, 1)): i for i, s in enumerate(specs)}
+            for fut in cf.as_completed(futures):
+                caches[futures[fut]].scores = fut.result()
+                progress.update(1)
+    else:
+        scenes = [load_frame(s, data_dir) for s in specs]  # every file read before any training
+        caches = [SceneCache(spec, scene, base) for spec, scene in zip(specs, scenes)]
+        del scenes
+        for c in caches:
+            for ov, sal in keys:
+                c.score(ov, saliency=sal)
+            progress.update(1)
+    progress.close()
+    log.info("%d frames scored with %d candidates in %.0f s", len(caches), len(keys), time.perf_counter() - t0)
     proto = Protocol(caches, cfg, grid, defaults)
     in_sample, in_sample_steps = proto.choose()
     for c in caches:
@@ -328,6 +374,13 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
             "candidates": {c.spec.name: {k: {m: v[m] for m in ("runs", "useful_hits", "all_objects_hits")}
                                          for k, v in c.scores.items()} for c in caches},
             "robustness": robustness, "wall_s": time.perf_counter() - t0}
+
+
+def _progress(total: int) -> Any:
+    """A progress bar over the frames (tqdm; off where stderr is not a terminal)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="frames", unit="frame", disable=None)
 
 
 def _verdict(key: str, entries: list[dict[str, Any]], in_sample: dict[str, Any], cfg: ValidateConfig) -> str:
@@ -370,7 +423,7 @@ def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]
     by scene name. A transform is a check of the rule (a mirrored or resampled scene is as easy
     as the original; a pole in front of the object is a failure class), not a tuning scene: the
     folds never see it. Scenes already resampled are skipped by a resampling transform."""
-    from experiments.scenes import add_junk
+    from .scenes import add_junk
 
     out = {}
     for c in caches:
@@ -452,10 +505,10 @@ ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="validate")
 def main(dcfg: DictConfig) -> int:
-    from experiments.cli import configure_threads
+    from .cli import configure_threads
 
     configure_threads()
-    from experiments.schema import one_line_errors
+    from .schema import one_line_errors
     from somtorch.atomic import write_staged
 
     with one_line_errors(log):
@@ -473,7 +526,7 @@ def main(dcfg: DictConfig) -> int:
 register()
 def cli() -> None:
     """Console entry: the overrides are checked against the schema first ("did you mean")."""
-    from experiments.cli import run_checked
+    from .cli import run_checked
 
     run_checked(main, ValidateConfig)
 

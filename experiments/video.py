@@ -15,7 +15,7 @@ stage timings; the frames per second; useful hits where scored) into the Hydra r
 from __future__ import annotations
 
 if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from experiments.help import maybe_print_help
+    from .help import maybe_print_help
 
     maybe_print_help("video")
 
@@ -33,8 +33,8 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
 from omegaconf import DictConfig, OmegaConf
 
-from experiments.cli import CONF
-from experiments.schema import RunConfig, register
+from .cli import CONF
+from .schema import RunConfig, register
 from somtorch.config import WarmStartConfig
 
 CONF_DIR = str(CONF)
@@ -45,7 +45,15 @@ log = logging.getLogger("somtorch.video")
 @dataclass
 class SequenceConfig(WarmStartConfig):
     """Which frames (``glob`` of disparity files, or a pan over ``data``) plus the warm start of
-    :class:`somtorch.config.WarmStartConfig`."""
+    :class:`somtorch.config.WarmStartConfig`.
+
+    Attributes:
+        glob: disparity files read as frames, in name order (None = a pan over ``data``).
+        frames: at most this many frames.
+        width: width in px of the pan's window.
+        height: height in px of the pan's window.
+        step_px: the pan's shift per frame in px.
+    """
 
     glob: Optional[str] = None
     frames: int = 60
@@ -65,7 +73,7 @@ ConfigStore.instance().store(name="video_schema", node=VideoConfig)
 
 def frames_of(cfg: VideoConfig):
     """The frames, lazily (a file is read when its frame is due; every path checked first)."""
-    from experiments.run import load_input
+    from .run import load_input
     from somtorch.disparity.io import read_disparity
     from somtorch.disparity.resize import resize_scene
     from somtorch.disparity.scene import scene_from_arrays
@@ -87,10 +95,10 @@ def frames_of(cfg: VideoConfig):
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="video")
 def main(dcfg: DictConfig) -> dict:
-    from experiments.cli import configure_threads
+    from .cli import configure_threads
 
     configure_threads()
-    from experiments.schema import one_line_errors
+    from .schema import one_line_errors
     from somtorch.atomic import write_staged
     from somtorch.video import SequenceRunner
 
@@ -125,7 +133,7 @@ def main(dcfg: DictConfig) -> dict:
 
 def cli() -> None:
     """Console entry: the overrides are checked against the schema first ("did you mean")."""
-    from experiments.cli import run_checked
+    from .cli import run_checked
 
     run_checked(main, VideoConfig)
 

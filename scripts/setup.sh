@@ -1,15 +1,19 @@
 #!/usr/bin/env bash
 # Set up somtorch on a fresh machine: system library for Open3D, a virtual environment, the CPU
 # build of torch FIRST (a plain `torch` requirement would pull a multi-GB CUDA build), then the rest.
-# Idempotent: a second run only checks. Usage: bash scripts/setup.sh [extra, default "test"]
+# Idempotent: a second run only checks. Usage: bash scripts/setup.sh [extra, default "base"]
+#   base: the package alone (scripts/run.sh); test: + the test extra (scripts/test.sh); bench, notebooks, ...
 set -euo pipefail
 cd "$(dirname "$0")/.."
-EXTRA="${1:-test}"
+EXTRA="${1:-base}"
 PY="${PYTHON:-python3.11}"
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 
 # 1. Open3D needs libusb-1.0 (Debian/Ubuntu: libusb-1.0-0).
-if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+# (the list is read whole first: `ldconfig -p | grep -q` under pipefail fails now and then, when grep
+#  exits at the first match and ldconfig dies of SIGPIPE)
+LIBS="$(ldconfig -p 2>/dev/null || true)"
+if [[ "$LIBS" != *libusb-1.0.so.0* ]]; then
   if command -v apt-get >/dev/null 2>&1; then
     SUDO=""; [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1 && SUDO="sudo"
     echo "[setup] installing libusb-1.0-0 for Open3D"
@@ -41,16 +45,33 @@ if ! $VPY -c 'import torch, sys; sys.exit(0 if torch.__version__.startswith("2.1
   fi
 fi
 
-# 4. The project and its other dependencies (torch already satisfies the range), once: a stamp of
-#    what was installed (pyproject.toml + extra) lets later commands start at once.
+# 4. The project and its other dependencies (torch already satisfies the range), once. The stamp
+#    holds the hash of pyproject.toml and the extras installed so far: a request for an extra already
+#    there (or for the base, which every extra includes) starts at once; a new extra installs it.
 STAMP=.venv/.somtorch-setup
-WANT="$EXTRA $(sha256sum pyproject.toml | cut -c1-16)"
-if [ "$(cat "$STAMP" 2>/dev/null)" = "$WANT" ] && $VPY -c 'import somtorch' 2>/dev/null; then
+HASH="$(sha256sum pyproject.toml | cut -c1-16)"
+read -r OLD_HASH OLD_EXTRAS <"$STAMP" 2>/dev/null || true
+[ "${OLD_HASH:-}" = "$HASH" ] || OLD_EXTRAS=""
+HAVE=",${OLD_EXTRAS:-base},"
+NEED=0
+for e in ${EXTRA//,/ }; do
+  [ "$e" = base ] || [[ "$HAVE" == *",$e,"* ]] || NEED=1
+done
+if [ "${OLD_HASH:-}" = "$HASH" ] && [ "$NEED" = 0 ] && $VPY -c 'import somtorch' 2>/dev/null; then
   exit 0
 fi
-echo "[setup] installing somtorch[$EXTRA]"
-$VPY -m pip install -q -e ".[$EXTRA]" 2>&1 | grep -v -E "^WARNING: Location|is ignored|^ " || true  # drop setuptools banners
-if [ "$EXTRA" = "test" ]; then
+if [ "$EXTRA" = base ]; then TARGET="."; else TARGET=".[$EXTRA]"; fi
+echo "[setup] installing somtorch${TARGET#.}"
+PIP_LOG="$(mktemp)"
+PIP_STATUS=0
+$VPY -m pip install -q -e "$TARGET" >"$PIP_LOG" 2>&1 || PIP_STATUS=$?
+grep -v -E "^WARNING: Location|is ignored|^ " "$PIP_LOG" || true  # drop setuptools banners
+rm -f "$PIP_LOG"
+if [ "$PIP_STATUS" -ne 0 ]; then
+  echo "[setup] ERROR: pip install -e \"$TARGET\" failed (status $PIP_STATUS); nothing recorded, run again" >&2
+  exit "$PIP_STATUS"
+fi
+if [[ ",$EXTRA," == *",test,"* ]]; then
   # the test oracle of somtorch.saliency_metrics; --no-deps: its metadata pins numpy < 2.3.5 and
   # scikit-image < 0.26, which it does not need (tests/test_saliency_metrics.py checks it works)
   $VPY -m pip install -q --no-deps "pysodmetrics==1.6.2" 2>&1 | quiet_pip || echo "[setup] WARNING: pysodmetrics not installed; its oracle test will skip" >&2
@@ -65,4 +86,5 @@ if [[ ",$EXTRA," == *",bench,"* ]]; then
     || echo "[setup] WARNING: somoclu not built; bench_core.py reports it missing" >&2
 fi
 $VPY -c 'import somtorch, torch; print(f"[setup] ok: somtorch {somtorch.__version__}, torch {torch.__version__}")'
-echo "$WANT" > "$STAMP"
+ALL="$(echo "${OLD_EXTRAS:-base},$EXTRA" | tr ',' '\n' | { grep -v -x -e '' -e base || true; } | sort -u | paste -sd, -)"
+echo "$HASH ${ALL:-base}" > "$STAMP"

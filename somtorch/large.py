@@ -7,11 +7,15 @@ a memory-mapped file and every epoch streams through it (:func:`somtorch.core.st
 fit_batch_chunked`), and the BMU labels of all pixels go block by block into an ``int16``
 memory map. Nothing of size ``H × W`` is ever held in RAM.
 
-The features are those of :func:`somtorch.disparity.features.make_features` with
-``normalize="image"`` (``y / side``, ``x / side``, ``d_weight · (d − d_min) / (d_max − d_min)``);
-the training set is the valid pixels on the ``train_stride`` grid (``y % s == 0`` and
-``x % s == 0``, the paper's OR mode) in row-major order, as ``Features.subsample`` takes it. The ground plane and the object step are not part of this path
-(they need the whole map); ``docs/scaling.md`` reports time and peak memory up to 100 M pixels.
+The features are those of :func:`somtorch.disparity.features.make_features` for the same
+:class:`~somtorch.config.FeatureConfig`, bitwise: the first pass gathers the statistics the scaling
+needs (disparity range, first and last valid row and column), :func:`~somtorch.disparity.features.
+feature_scaling` turns them into the same affine map, and every block goes through the same
+:func:`~somtorch.disparity.features.pixel_features`. The training set is the valid pixels on the
+grid of ``stride_at(train_stride)`` (``reference_pixels`` honoured; ``y % s == 0`` and ``x % s ==
+0``, the paper's OR mode) in row-major order, as ``Features.subsample`` takes it. Colour features
+and speckle removal need the whole map (or an image) and are refused, as are the ground plane and
+the object step; ``docs/scaling.md`` reports time and peak memory up to 100 M pixels.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import torch
 from .config import FeatureConfig, SOMConfig, TrainConfig
 from .core import SOM
 from .core.streaming import fit_batch_chunked
+from .disparity.features import feature_scaling, pixel_features
 
 __all__ = ["LargeResult", "train_segment_large"]
 
@@ -61,7 +66,8 @@ def train_segment_large(disparity: np.ndarray, workdir: str | Path, *, som: SOMC
         workdir: where the training features (``train_features.npy``) and the labels
             (``labels.npy``) are written.
         som, train, features: the configs (defaults: the library's); ``train`` runs the batch
-            map whatever its ``mode``.
+            map whatever its ``mode``; ``features`` as :func:`~somtorch.disparity.features.make_features`
+            reads it (``color_weight`` and ``speckle_frac`` must be 0).
         memory_budget: bytes the working set may use (the block size follows it).
     """
     som_cfg, tc, fc = som or SOMConfig(), train or TrainConfig(), features or FeatureConfig()
@@ -69,6 +75,12 @@ def train_segment_large(disparity: np.ndarray, workdir: str | Path, *, som: SOMC
         raise ValueError(f"disparity must be (H, W); got shape {disparity.shape}")
     if memory_budget < 64 << 20:
         raise ValueError(f"memory_budget must be at least 64 MiB; got {memory_budget}")
+    if fc.color_weight > 0:
+        raise ValueError(f"features.color_weight={fc.color_weight}: the large-map path reads a disparity map "
+                         "only, without the left image; set color_weight=0")
+    if fc.speckle_frac > 0:
+        raise ValueError(f"features.speckle_frac={fc.speckle_frac}: speckle removal needs the whole map in "
+                         "memory; set speckle_frac=0 (or remove speckles when writing the map)")
     work = Path(workdir)
     work.mkdir(parents=True, exist_ok=True)
     h, w = disparity.shape
@@ -76,10 +88,11 @@ def train_segment_large(disparity: np.ndarray, workdir: str | Path, *, som: SOMC
     t: dict[str, float] = {}
     valid_of = _valid if zero_invalid else (lambda b: np.isfinite(b) & (b >= 0))
 
-    # pass 1: valid count, disparity range
+    # pass 1: valid count and what the scaling needs (disparity range, valid rows and columns)
     t0 = time.perf_counter()
-    stride = fc.train_stride
+    stride = fc.stride_at(fc.train_stride, h, w)
     n_valid, n_train, d_lo, d_hi = 0, 0, np.inf, -np.inf
+    y_lo, y_hi, col_any = -1, -1, np.zeros(w, dtype=bool)
     for r in range(0, h, rows):
         b = np.asarray(disparity[r:r + rows], dtype=np.float32)
         v = valid_of(b)
@@ -87,20 +100,21 @@ def train_segment_large(disparity: np.ndarray, workdir: str | Path, *, som: SOMC
         n_train += int(v[(-r) % stride::stride, ::stride].sum())
         if v.any():
             d_lo, d_hi = min(d_lo, float(b[v].min())), max(d_hi, float(b[v].max()))
+            in_rows = np.nonzero(v.any(1))[0]
+            y_lo = r + int(in_rows[0]) if y_lo < 0 else y_lo
+            y_hi = r + int(in_rows[-1])
+            col_any |= v.any(0)
     if n_valid == 0:
         raise ValueError("the disparity map has no valid pixel")
-    side = float(max(h, w) - 1 or 1)
-    scale = np.array([1 / side, 1 / side, fc.d_weight / max(d_hi - d_lo, 1e-6)], dtype=np.float64)
-    offset = np.array([0.0, 0.0, d_lo])
+    cols = np.nonzero(col_any)[0]
+    offset, scale = feature_scaling((h, w), normalize=fc.normalize, d_weight=fc.d_weight, d_range=(d_lo, d_hi),
+                                    y_range=(y_lo, y_hi), x_range=(int(cols[0]), int(cols[-1])))
     t["scan"] = time.perf_counter() - t0
 
-    def block_features(r: int, b: np.ndarray, v: np.ndarray) -> np.ndarray:
+    def block_features(r: int, b: np.ndarray, v: np.ndarray) -> torch.Tensor:
         ys, xs = np.nonzero(v)
-        f = np.empty((len(ys), 3), dtype=np.float32)
-        f[:, 0] = (ys + r - offset[0]) * scale[0]
-        f[:, 1] = (xs - offset[1]) * scale[1]
-        f[:, 2] = (b[v] - offset[2]) * scale[2]
-        return f
+        columns = [torch.from_numpy(ys + r), torch.from_numpy(xs), torch.from_numpy(b[v])]
+        return pixel_features(columns, offset, scale, torch.float32)
 
     # pass 2: the training features, the valid pixels of the stride grid in row-major order, to disk
     t0 = time.perf_counter()
@@ -110,7 +124,7 @@ def train_segment_large(disparity: np.ndarray, workdir: str | Path, *, som: SOMC
         b = np.asarray(disparity[r:r + rows], dtype=np.float32)
         grid = np.zeros(b.shape, dtype=bool)
         grid[(-r) % stride::stride, ::stride] = True
-        take = block_features(r, b, valid_of(b) & grid)
+        take = block_features(r, b, valid_of(b) & grid).numpy()
         tf[pos:pos + len(take)] = take
         pos += len(take)
     tf.flush()
@@ -134,7 +148,7 @@ def train_segment_large(disparity: np.ndarray, workdir: str | Path, *, som: SOMC
         v = valid_of(b)
         out = np.full(b.shape, -1, dtype=np.int16)
         if v.any():
-            bmu = model.bmu(torch.from_numpy(block_features(r, b, v)))[0]
+            bmu = model.bmu(block_features(r, b, v))[0]
             out[v] = bmu.numpy().astype(np.int16)
         labels[r:r + rows] = out
     labels.flush()

@@ -148,6 +148,6 @@ def write_point_clouds(scene: Scene, result: PipelineResult, out_dir: Path, *, m
             info["render_backend"] = render_point_cloud(
                 reduced, out_dir / "cloud_reduced.png", backend=render_backend, view="oblique",
                 unit=cam.baseline_unit, title=f"{scene.name}: reduced point cloud, {len(reduced):,} points "
-                                              "(depth clipped to its 1-99 % range)")
+                                              "(framed on the 2-98 % range of x, y and depth)")
     info["seconds"] = time.perf_counter() - t0
     return info

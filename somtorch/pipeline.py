@@ -23,7 +23,7 @@ import torch
 from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, PipelineConfig, ReductionConfig,
                      SOMConfig, TrainConfig)
 from .core import SOM
-from .disparity.features import Features, make_features
+from .disparity.features import Features, make_features, relative_disparity
 from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
@@ -34,7 +34,8 @@ from .tasks.reduction import Reduction, reduce_map, valid_integral
 from .tasks.scoring import Score, optimal_reduction, score_reduction
 
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
-           "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig", "run_pipeline"]
+           "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig", "detect", "map_stride",
+           "run_pipeline", "train_stride"]
 DETERMINISTIC_METHODS = tuple(n for n, s in SEGMENTERS.items() if s.deterministic)
 log = logging.getLogger("somtorch.pipeline")
 
@@ -141,7 +142,9 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     with timer("ground"):
         ground = ground_fn(valid) if ground_fn is not None else fit_ground_plane(scene.disparity, valid, cfg.ground)
     with timer("features"):
-        usable = valid if ground is None else valid & ~ground.mask
+        work = on_support(scene, ground, cfg.features)[0]
+        # the plane's pixels leave the map, except under heights above it (they are its level 0)
+        usable = valid if ground is None or work is not scene else valid & ~ground.mask
         rows = usable
         stride = train_stride(scene, cfg)
         if grid > 1:  # the grid's pixels and the training pixels
@@ -149,7 +152,7 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
             rows[::grid, ::grid] = usable[::grid, ::grid]
             rows[::stride, ::stride] = usable[::stride, ::stride]
         f = cfg.features
-        feats = make_features(scene.disparity, rows, normalize=f.normalize, d_weight=f.d_weight,
+        feats = make_features(work.disparity, rows, normalize=f.normalize, d_weight=f.d_weight,
                               image=scene.image if f.color_weight > 0 else None, color_weight=f.color_weight)
         train = feats.subsample(stride)
         if len(train) == 0:
@@ -159,10 +162,32 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     return valid, ground, usable, feats, train
 
 
+def on_support(scene: Scene, ground: GroundPlane | None,
+               features: FeatureConfig) -> tuple[Scene, GroundPlane | None]:
+    """The scene and plane the segmentation and the object step read: as given, or — with
+    ``features.d_mode="plane_residual"`` and a plane the support test verified
+    (:attr:`~somtorch.tasks.ground.GroundPlane.support`) — the scene whose disparity is the height
+    above the plane (:func:`~somtorch.disparity.features.relative_disparity`) and the plane at
+    height 0 (same band and mask), so that the areas' contrast, joining and ground clutter are
+    measured against the support surface too. Valid mask, image and objects are unchanged.
+
+    A plane found by the position rule alone is not used: a forward camera's floor recedes to a
+    horizon and everything beyond its far end (walls, buildings) stands high above its extension.
+    """
+    if features.d_mode == "raw" or ground is None or not ground.support:
+        return scene, ground
+    h, w = scene.disparity.shape
+    height = relative_disparity(scene.disparity, ground.disparity(h, w))
+    level = GroundPlane(0.0, 0.0, 0.0, ground.tol, ground.mask, ground.inlier_frac, ground.support)
+    return replace(scene, disparity=height), level
+
+
 def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: PipelineConfig,
            timer: _Timer | None = None) -> list[MemberResult]:
-    """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d)."""
+    """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d), on the scene
+    and plane of :func:`on_support` (``ground`` as fitted)."""
     timer = timer or _Timer()
+    scene, ground = on_support(scene, ground, cfg.features)
     st = map_stride(scene, cfg)
     h, w = scene.disparity.shape
     with timer("objects"):  # every member segments the same pixels: one context for all
@@ -239,7 +264,8 @@ def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg
     if s == 1:
         return scene.disparity, scene.valid, labels, ground, cfg
     g = None if ground is None else GroundPlane(ground.a * s, ground.b * s, ground.c, ground.tol,
-                                                ground.mask[::s, ::s].contiguous(), ground.inlier_frac)
+                                                ground.mask[::s, ::s].contiguous(), ground.inlier_frac,
+                                                ground.support)
     return (scene.disparity[::s, ::s].contiguous(), scene.valid[::s, ::s].contiguous(),
             labels[:, ::s, ::s].contiguous(), g, replace(cfg, grow_stride=max(1, cfg.grow_stride // s)))
 
@@ -268,7 +294,8 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     cfg = cfg or PipelineConfig()
     timer = _Timer()
     valid, ground, usable, feats, train = prepare(scene, cfg, timer)
-    seg = run_segmenter(feats, train, scene, usable, cfg, progress=progress, log_training=log_training, timer=timer)
+    work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
+    seg = run_segmenter(feats, train, work, usable, cfg, progress=progress, log_training=log_training, timer=timer)
     members = detect(scene, seg, ground, cfg, timer)
     runs = seg.labels.shape[0]
     qe = te = torch.full((runs,), float("nan"))

@@ -23,6 +23,7 @@ from typing import Any
 import torch
 
 from .config import PipelineConfig
+from .config.options import register_method
 from .core import SOM, StepInfo
 from .disparity.features import Features
 from .tasks.segmentation import segment
@@ -69,8 +70,9 @@ SEGMENTERS: dict[str, Segmenter] = {}
 
 
 def register(name: str, *, deterministic: bool = False, has_grid: bool = False) -> Callable:
-    """Decorator: register ``fn`` as the segmenter ``name``."""
+    """Decorator: register ``fn`` as the segmenter ``name`` (and ``name`` as a valid ``method``)."""
     def deco(fn: Callable[..., Segmentation]) -> Callable[..., Segmentation]:
+        register_method(name, deterministic)
         SEGMENTERS[name] = Segmenter(name, fn, deterministic, has_grid)
         return fn
     return deco
@@ -116,6 +118,7 @@ def _som(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg
             log_training("train/quantization_error", float(som.quantization_error(x).mean()), step)
             log_training("train/topographic_error", float(som.topographic_error(x).mean()), step)
             log_training("train/sigma", float(info.sigma.mean()), step)
+            log_training("train/bmu_skipped", info.skipped, step)
     if tc.parallel != "none":
         som = _fit_parallel(som, train, cfg)
     else:

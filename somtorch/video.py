@@ -30,7 +30,7 @@ import torch
 from .config import PipelineConfig, WarmStartConfig
 from .core import SOM
 from .disparity.scene import Scene
-from .pipeline import MemberResult, _Timer, detect, map_stride, prepare
+from .pipeline import MemberResult, _Timer, detect, map_stride, on_support, prepare
 from .segmenters import Segmentation, _from_prototypes, run_segmenter
 from .tasks.ground import GroundPlane, fit_ground_plane
 from .tasks.segmentation import segment
@@ -94,7 +94,7 @@ class SequenceRunner:
             share = float(mask.sum()) / max(int(valid.sum()), 1)
             if share >= self.ground_keep * g.inlier_frac:
                 self._ground_age += 1
-                plane = GroundPlane(g.a, g.b, g.c, g.tol, mask, share)
+                plane = GroundPlane(g.a, g.b, g.c, g.tol, mask, share, g.support)
                 plane._cache = g._cache  # the same plane: its disparity map is not recomputed
                 return plane, True
         g = fit_ground_plane(scene.disparity, valid, cfg)
@@ -115,6 +115,7 @@ class SequenceRunner:
         grid = st if self.warm and self.som is not None else 1
         valid, ground, usable, feats, train = prepare(scene, cfg, timer, ground_fn=ground_fn, grid=grid)
         warm = self.warm and self.som is not None and self.som.dim == train.x.shape[-1]
+        work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
         if not warm and grid > 1:  # (features of another width than the map's: never with one config)
             valid, ground, usable, feats, train = prepare(scene, cfg, timer, ground_fn=lambda v: ground)
             grid = 1
@@ -131,7 +132,7 @@ class SequenceRunner:
                 on = feats if grid > 1 else feats.subsample(st)
                 seg.labels = segment(w, on.x, on.pixels, on.shape)
         else:  # cold: exactly run_pipeline's segmenter
-            seg = run_segmenter(feats, train, scene, usable, cfg, timer=timer)
+            seg = run_segmenter(feats, train, work, usable, cfg, timer=timer)
             self.som = seg.som
         members = detect(scene, seg, ground, cfg, timer)
         t = dict(timer.t)

@@ -6,6 +6,7 @@ All functions return ``uint8`` RGB arrays ``(H, W, 3)`` (so they also feed Tenso
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -133,18 +134,44 @@ TINTS = [(255, 60, 60), (255, 160, 0), (200, 60, 255), (0, 200, 200)]
 """Colours of the kept areas in :func:`draw_areas` (area 1, 2, …), also the summary's legend."""
 
 
+def identified_percent(fraction: float) -> str:
+    """``fraction`` (0–1) as a percentage floored to one decimal: 0.998 → ``"99.8 %"``, and only a
+    complete identification reads ``"100 %"`` (rounding would print 99.96 % as 100 %).
+
+    >>> identified_percent(0.9980125), identified_percent(0.99996), identified_percent(1.0)
+    ('99.8 %', '99.9 %', '100 %')
+    """
+    if fraction >= 1.0:
+        return "100 %"
+    return f"{math.floor(fraction * 1000 + 1e-9) / 10:.1f} %"  # + 1e-9: 0.29 * 1000 is 289.99…
+
+
 def summary_figure(scene, result, path: str | os.PathLike, member: int = 0) -> Path:
+    """:func:`draw_summary` written to ``path`` as PNG, atomically."""
+    import matplotlib.pyplot as plt
+
+    fig = draw_summary(scene, result, member)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return path
+
+
+def draw_summary(scene, result, member: int = 0):
     """The paper's Fig. 18 for one member, figure-ready: (a) disparity with its colour bar in px,
     invalid pixels grey and the removed ground hatched blue; (b) the SOM's reference vectors over
     it; (c) the segments; (d) the object areas (kept ones tinted, their boxes, the labelled object
     outlined) with a legend; (e) what is kept (valid pixels inside the boxes) and (f) the reduced
-    map with the same colour scale as (a). The title carries the verdict. Written atomically."""
+    map with the same colour scale as (a). The title carries the verdict (the identified share floored,
+    :func:`identified_percent`). Returns the matplotlib figure (Agg; close it after use)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
+    from matplotlib.transforms import offset_copy
 
     from .tasks.segmentation import color_map
 
@@ -155,13 +182,15 @@ def summary_figure(scene, result, path: str | os.PathLike, member: int = 0) -> P
     lo, hi = (np.nanpercentile(d, [1, 99]) if valid.any() else (0.0, 1.0))
     ground = result.ground.mask.numpy() if result.ground is not None else None
     h, w = d.shape
-    fig, axes = plt.subplots(2, 3, figsize=(15, 10 * h / w + 1.6), dpi=80, constrained_layout=True)
+    # two rows of panels about 4.4 in wide (h / w of that high) plus titles, tick labels, x labels and
+    # the legends under (d) and (e)
+    fig, axes = plt.subplots(2, 3, figsize=(15, 2 * 4.4 * h / w + 3.2), dpi=80, constrained_layout=True)
     cmap = matplotlib.colormaps["turbo"].copy()
     cmap.set_bad((0.55, 0.55, 0.55))
 
     def disparity_panel(ax, values, title):
         im = ax.imshow(values, cmap=cmap, vmin=lo, vmax=hi, interpolation="nearest")
-        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02, label="disparity [px]")
+        fig.colorbar(im, cax=ax.inset_axes([1.03, 0.0, 0.04, 1.0]), label="disparity [px]")  # as high as the map
         ax.set_title(title)
 
     disparity_panel(axes[0, 0], d, "(a) disparity (grey: no value)")
@@ -191,9 +220,12 @@ def summary_figure(scene, result, path: str | os.PathLike, member: int = 0) -> P
     if obj is not None:
         handles.append(Patch(facecolor="none", edgecolor=(0, 1, 0), linewidth=2, label="labelled object"))
     if ground is not None:
-        handles.append(Patch(color=(40 / 255, 90 / 255, 1.0), alpha=0.5, label="ground plane (removed)"))
-    axes[1, 0].legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.24), ncol=2, fontsize=8,
-                      frameon=False)
+        # the ground is left out of the segmentation; inside a kept box its pixels are kept, as (e) shows
+        handles.append(Patch(color=(40 / 255, 90 / 255, 1.0), alpha=0.5,
+                             label="ground plane (not segmented; kept inside a kept box)"))
+    below = offset_copy(axes[1, 0].transAxes, fig=fig, y=-34, units="points")  # under the x label
+    axes[1, 0].legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below,
+                      ncol=1, fontsize=8, frameon=False)
     axes[1, 0].set_title("(d) object areas" + (" — no convincing area: whole map kept" if m.no_object else ""))
     kept = np.zeros((h, w), np.int8)
     kept[valid] = 1
@@ -203,7 +235,8 @@ def summary_figure(scene, result, path: str | os.PathLike, member: int = 0) -> P
     axes[1, 1].legend(handles=[Patch(color=(0.1, 0.45, 0.85), label=f"kept ({m.reduction.kept_union:,} px)"),
                                Patch(color=(0.85, 0.85, 0.85), label="removed"),
                                Patch(color=(0.55, 0.55, 0.55), label="no disparity")],
-                      loc="upper center", bbox_to_anchor=(0.5, -0.24), ncol=3, fontsize=8, frameon=False)
+                      loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=3, fontsize=8, frameon=False,
+                      bbox_transform=offset_copy(axes[1, 1].transAxes, fig=fig, y=-34, units="points"))
     axes[1, 1].set_title(f"(e) kept region: reduction {m.reduction.reduction_union:.1f} %")
     disparity_panel(axes[1, 2], np.where(valid & m.reduction.mask.numpy(), d, np.nan), "(f) reduced map")
     for ax in axes.flat:
@@ -212,12 +245,8 @@ def summary_figure(scene, result, path: str | os.PathLike, member: int = 0) -> P
     verdict = ""
     if m.score is not None:
         s = m.score
-        verdict = (f" — object {s.identified_fraction:.0%} identified, x_opt {s.x_opt:.1f} %: "
+        verdict = (f" — object {identified_percent(s.identified_fraction)} identified, x_opt {s.x_opt:.1f} %: "
                    f"{'useful' if s.useful_hit else 'not useful'}")
     fig.suptitle(f"{scene.name}, member {member} (seed {m.seed}), {len(m.kept)} kept area(s), reduction "
                  f"{m.reduction.reduction_union:.1f} %{verdict}", fontsize=13)
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-    return path
+    return fig

@@ -33,7 +33,7 @@ def test_the_cli_without_overrides_is_the_library_default():
 
 
 def test_the_library_called_without_arguments_runs_what_the_cli_runs():
-    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity import load_scene
     from somtorch.pipeline import run_pipeline
 
     scene = load_scene("motorcycle")
@@ -102,10 +102,38 @@ def test_wrong_types_are_type_errors_and_overrides_are_validated():
 
 
 def test_a_segmenter_without_a_grid_refuses_grid_linking(shared_data):
-    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity import load_scene
     from somtorch.pipeline import run_pipeline
 
     scene = load_scene("motorcycle")
     cfg = with_overrides(PipelineConfig(method="kmeans"), {"objects.link": "grid"})
     with pytest.raises(ValueError, match="no SOM grid"):
         run_pipeline(scene, cfg, metrics=False)
+
+
+def test_option_tables_match_the_registries_that_implement_them():
+    """``somtorch.config.options`` declares the names; the implementing registries serve exactly those."""
+    from somtorch.config import options
+    from somtorch.core.decay import DECAYS
+    from somtorch.core.neighborhood import NEIGHBORHOODS
+    from somtorch.segmenters import SEGMENTERS
+
+    assert tuple(DECAYS) == options.DECAYS
+    assert tuple(NEIGHBORHOODS) == options.NEIGHBORHOODS
+    assert {n: s.deterministic for n, s in SEGMENTERS.items()} == options.METHODS
+
+
+def test_a_registered_segmenter_is_a_valid_method():
+    from somtorch.config import options
+    from somtorch.segmenters import SEGMENTERS, register
+
+    with pytest.raises(ValueError, match="method='custom_test' is not known"):
+        PipelineConfig(method="custom_test")
+    try:
+        register("custom_test", deterministic=True)(lambda *a: None)
+        assert PipelineConfig(method="custom_test", ensemble=3).runs == 1
+        with pytest.raises(ValueError, match="declared deterministic"):
+            register("slic", deterministic=False)(lambda *a: None)
+    finally:
+        SEGMENTERS.pop("custom_test", None)
+        options.METHODS.pop("custom_test", None)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from somtorch.config import FeatureConfig
+from somtorch.config import FeatureConfig, TrainConfig
 from somtorch.disparity.features import make_features
 from somtorch.large import _block_rows, train_segment_large
 
@@ -27,7 +27,7 @@ def test_training_features_are_the_in_memory_ones(disp, tmp_path):
     ref = make_features(dt, dt > 0, normalize="image").subsample(FeatureConfig().train_stride)
     got = np.load(tmp_path / "w" / "train_features.npy")
     assert got.shape == tuple(ref.x.shape) and res.n_train == len(got)
-    assert np.allclose(got, ref.x.numpy(), atol=1e-6)
+    assert np.array_equal(got, ref.x.numpy())
     labels = np.asarray(res.labels)
     assert labels.dtype == np.int16 and labels.shape == disp.shape
     assert np.array_equal(labels >= 0, np.asarray(disp) > 0)
@@ -53,3 +53,34 @@ def test_bad_inputs(tmp_path):
         train_segment_large(np.zeros(10, np.float32), tmp_path)
     with pytest.raises(ValueError, match="64 MiB"):
         train_segment_large(np.ones((10, 10), np.float32), tmp_path, memory_budget=1000)
+
+
+@pytest.mark.parametrize("normalize", ["image", "minmax", "none"])
+@pytest.mark.parametrize(("d_weight", "train_stride", "reference_pixels"),
+                         [(2.0, 10, 307_200), (0.5, 3, 0), (1.0, 4, 30_000), (2.0, 1, 307_200)])
+def test_features_equal_make_features_for_every_option(disp, tmp_path, normalize, d_weight, train_stride,
+                                                       reference_pixels):
+    """One FeatureConfig means one thing: the large path's training features are make_features's,
+    bitwise, strided as the pipeline strides them (``stride_at``, so ``reference_pixels`` counts)."""
+    fc = FeatureConfig(normalize=normalize, d_weight=d_weight, train_stride=train_stride,
+                       reference_pixels=reference_pixels)
+    d = np.array(disp)
+    d[:7] = 0.0  # no valid pixel in the first rows and the last columns: minmax offsets are not 0
+    d[:, -5:] = 0.0
+    res = train_segment_large(d, tmp_path / "w", features=fc, memory_budget=64 << 20,
+                              train=TrainConfig(epochs=1))
+    dt = torch.from_numpy(d)
+    full = make_features(dt, dt > 0, normalize=normalize, d_weight=d_weight)
+    stride = fc.stride_at(train_stride, *d.shape)
+    assert stride == (8 if reference_pixels == 30_000 else train_stride)  # 4 · √(120,000 / 30,000)
+    ref = full.subsample(stride)
+    got = torch.from_numpy(np.load(tmp_path / "w" / "train_features.npy"))
+    assert torch.equal(got, ref.x)
+    labels = np.asarray(res.labels)
+    assert np.array_equal(labels[d > 0], res.som.bmu(full.x)[0].numpy())
+
+
+@pytest.mark.parametrize(("field", "value"), [("color_weight", 0.5), ("speckle_frac", 0.01)])
+def test_options_the_large_path_cannot_honour_are_refused(disp, tmp_path, field, value):
+    with pytest.raises(ValueError, match=f"features.{field}"):
+        train_segment_large(disp, tmp_path, features=FeatureConfig(**{field: value}))

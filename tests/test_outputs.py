@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from somtorch.disparity.scene import load_scene, scene_from_arrays
+from somtorch.disparity import load_scene, scene_from_arrays
 from somtorch.geometry import read_ply
 from somtorch.outputs import summarize, write_maps, write_point_clouds
 from somtorch.pipeline import PipelineConfig, TrainConfig, run_pipeline

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from somtorch.disparity.scene import load_scene
+from somtorch.disparity import load_scene
 from somtorch.pipeline import PipelineConfig, SOMConfig, TrainConfig, run_pipeline, train_stride
 from somtorch.tasks.reduction import reduce_map
 from somtorch.tasks.scoring import Score
@@ -211,7 +211,7 @@ def test_a_map_without_a_convincing_object_keeps_everything_flags_it_and_warns(c
     not torch.cuda.is_available(), reason="no CUDA device on this machine"))])
 def test_device_flows_through_the_pipeline(device):
     from somtorch.config import PipelineConfig, with_overrides
-    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity import load_scene
     from somtorch.pipeline import run_pipeline
 
     scene = load_scene("motorcycle")
@@ -226,7 +226,7 @@ def test_device_flows_through_the_pipeline(device):
 
 def test_an_unavailable_device_is_refused_before_training():
     from somtorch.config import PipelineConfig, with_overrides
-    from somtorch.disparity.scene import load_scene
+    from somtorch.disparity import load_scene
     from somtorch.pipeline import run_pipeline
 
     scene = load_scene("motorcycle")

@@ -94,3 +94,32 @@ def test_image_or_disparity():
                                   img.permute(1, 2, 0).numpy())
     d = torch.arange(35.0).view(5, 7)
     np.testing.assert_array_equal(viz.image_or_disparity(None, d, ok), viz.grey(d))
+
+
+@pytest.mark.parametrize("fraction, text", [(0.9980125606169011, "99.8 %"), (0.99996, "99.9 %"), (1.0, "100 %"),
+                                            (0.29, "29.0 %"), (0.0, "0.0 %")])
+def test_identified_percent_never_rounds_up_to_complete(fraction, text):
+    from somtorch.viz import identified_percent
+
+    assert identified_percent(fraction) == text
+
+
+def test_summary_legends_sit_below_the_x_labels_of_a_wide_map():
+    """A KITTI-like strip (741 x 170): the legends under (d) and (e) do not cover the x label."""
+    from somtorch.disparity import load_scene
+    from somtorch.disparity.scene import scene_from_arrays
+    from somtorch.pipeline import run_pipeline
+    from somtorch.viz import draw_summary
+
+    full = load_scene("motorcycle")
+    scene = scene_from_arrays(full.disparity[240:410], full.valid[240:410], name="strip")
+    fig = draw_summary(scene, run_pipeline(scene, metrics=False))
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    for ax in fig.axes[:6]:
+        if ax.get_legend() is not None:
+            legend, label = ax.get_legend().get_window_extent(r), ax.xaxis.label.get_window_extent(r)
+            assert legend.y1 <= label.y0, (ax.get_title(), legend, label)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)

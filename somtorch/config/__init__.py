@@ -19,7 +19,7 @@ The list of tuned constants of the object step, their values and how each was ch
 
 from __future__ import annotations
 
-from ..constraints import Choice, Flag, Interval, OneOf, Validated
+from .constraints import Choice, Flag, Interval, OneOf, Validated
 from .objects import AreaConfig, GroundConfig
 from .pipeline import OutputConfig, PipelineConfig, ReductionConfig, WarmStartConfig, with_overrides
 from .segmentation import BaselineConfig, FeatureConfig, SOMConfig, TrainConfig

@@ -6,16 +6,26 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from ..constraints import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
+from . import options
+from .constraints import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
 
 
 # ---------------------------------------------------------------------------------- ground plane
 @dataclass
 class GroundConfig(Validated):
-    """The support surface (floor, road), found by RANSAC in (x, y, d) and verified before removal.
+    """The support surface (floor, road, table top), found by RANSAC in (x, y, d) and verified
+    before removal.
+
+    Verification (``rule``): ``"position"`` — where a forward camera sees its floor (``min_slope_frac``,
+    tilt in x ≤ tilt in y, ``max_top_frac``; RANSAC on the lower image half); ``"support"`` — by what
+    the plane supports, at any camera pitch (``support_frac`` of the pixels on it, the pixels above
+    it in compact protrusions of at most ``max_protrusion_frac``; RANSAC on the whole map);
+    ``"either"`` — a plane passing either (RANSAC on the lower half). Every rule also needs ``min_inlier_frac`` and
+    ``max_below_frac`` (nothing substantial behind the plane).
 
     Attributes:
         enabled: look for a ground plane at all.
+        rule: ``"position"``, ``"support"`` or ``"either"`` (above).
         tol_frac: inlier band half-width as a fraction of the map's disparity range (1st–99th
             percentile) …
         tol_px: … but at least this many px.
@@ -23,8 +33,16 @@ class GroundConfig(Validated):
         min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
             of the disparity range: a floor spans it, from its horizon to the nearest thing in view;
             a seat, a bed, a table top or a slanted wall spans a part (docs/tuned_constants.md).
+            Position rule (with tilt in x ≤ tilt in y).
         max_top_frac: a plane covering more than this share of the valid pixels of the top third
-            of the image is not ground (a wall or a slanted object).
+            of the image is not ground (a wall or a slanted object). Position rule.
+        support_frac: support rule: the plane holds at least this share of the valid pixels (a
+            floor or table top filling the view; a forward camera's floor holds 14–40 %, the
+            far-room slab of oakd_pov_controllers 55 %: docs/method.md).
+        max_protrusion_frac: support rule: every image-connected piece of the pixels *above* the
+            plane (nearer than its band where it is in view) holds at most this share of the valid
+            pixels — objects standing on a surface are compact; a scene standing in front of a
+            wall-like plane is not.
         max_below_frac: a support surface hides what lies beneath it, so at most this share of the
             valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
             (disparity below the band); a ramp, a lattice or a plane through the objects fails
@@ -32,6 +50,10 @@ class GroundConfig(Validated):
         slope_rows: a ground pixel must also rise down the image like the plane, measured over
             ``slope_rows ×`` the image height above and below it, so the vertical surfaces that
             cross the plane's band (an object's base, legs) stay out of the mask (0 = off).
+        foot_frac: pixels within this share of the shorter image side of a protrusion (a pixel
+            above the plane's band, in a solid 3 × 3 block) leave the mask: the
+            feet of the objects standing on the plane cross its band (every rule; applied after the
+            tests, so it changes the mask, not the verdict; 0 = off).
         iterations: RANSAC hypotheses.
         sample: pixels drawn for RANSAC (and, with ``constrained``, for the tests).
         seed: RANSAC seed (the result does not depend on the SOM seed).
@@ -42,13 +64,15 @@ class GroundConfig(Validated):
 
     _group: ClassVar[str] = "ground"
     _constraints: ClassVar[dict[str, Any]] = {
-        "enabled": BOOL, "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
+        "enabled": BOOL, "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_top_frac": FRACTION, "max_below_frac": FRACTION,
-        "slope_rows": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
-        "constrained": BOOL, "tries": POSITIVE_INT,
+        "slope_rows": Interval(0, 0.25), "foot_frac": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
+        "constrained": BOOL, "tries": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
+        "max_protrusion_frac": FRACTION,
     }
 
     enabled: bool = True
+    rule: str = "position"
     tol_frac: float = 0.02
     tol_px: float = 0.5
     min_inlier_frac: float = 0.08
@@ -56,11 +80,14 @@ class GroundConfig(Validated):
     max_top_frac: float = 0.15
     max_below_frac: float = 0.1
     slope_rows: float = 0.0
+    foot_frac: float = 0.0
     iterations: int = 400
     sample: int = 5000
     seed: int = 0
     constrained: bool = True
     tries: int = 5
+    support_frac: float = 0.6
+    max_protrusion_frac: float = 0.2
 
 
 # ------------------------------------------------------------------------------ step 1c: objects
@@ -123,13 +150,13 @@ class AreaConfig(Validated):
 
     _group: ClassVar[str] = "objects"
     _constraints: ClassVar[dict[str, Any]] = {
-        "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice("somtorch.tasks.objects:LINKS"),
-        "spread": Choice("somtorch.tasks.objects:SPREADS"), "min_boundary": NON_NEGATIVE,
+        "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice(options.LINKS),
+        "spread": Choice(options.SPREADS), "min_boundary": NON_NEGATIVE,
         "size_power": NON_NEGATIVE, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
-        "select": Choice("somtorch.tasks.objects:SELECTIONS"), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
+        "select": Choice(options.SELECTIONS), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
         "keep_budget": Interval(0, 1, open_lo=True),
         "fail_safe": BOOL, "max_area_frac": Interval(0, 1, open_lo=True),
         "min_area_frac": FRACTION,

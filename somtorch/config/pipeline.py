@@ -6,7 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from ..constraints import BOOL, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
+from . import options
+from .constraints import BOOL, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
 from .objects import AreaConfig, GroundConfig
 from .segmentation import BaselineConfig, FeatureConfig, SOMConfig, TrainConfig
 
@@ -100,10 +101,18 @@ class PipelineConfig(Validated):
     its groups, ``ensemble`` members (seeds ``seed … seed + ensemble − 1``), the scored
     ``object_id`` (None = the scene's main object(s)) and the torch ``device`` the SOM trains and
     labels the pixels on (``"cpu"``, ``"cuda"``, ``"cuda:1"``, ``"mps"``; the object step runs on
-    the CPU)."""
+    the CPU).
+
+    Attributes:
+        method: the segmenter of step 1b ("som"; baselines: see somtorch.segmenters.SEGMENTERS).
+        ensemble: SOMs trained at once, one per seed (seed, seed + 1, ...).
+        seed: seed of the first member.
+        object_id: the scored object id of the scene's mask (None = the scene's main object(s)).
+        device: torch device the SOM trains and labels pixels on ("cpu", "cuda", "cuda:1", "mps").
+    """
 
     _constraints: ClassVar[dict[str, Any]] = {
-        "method": Choice("somtorch.segmenters:METHODS"), "ensemble": POSITIVE_INT,
+        "method": Choice(options.METHODS), "ensemble": POSITIVE_INT,
         "seed": Interval(0, None, integer=True), "object_id": Interval(1, None, integer=True, optional=True),
     }
 
@@ -123,9 +132,7 @@ class PipelineConfig(Validated):
     @property
     def runs(self) -> int:
         """Members actually computed: ``ensemble``, or 1 for a deterministic method."""
-        from ..segmenters import SEGMENTERS
-
-        return 1 if SEGMENTERS[self.method].deterministic else self.ensemble
+        return 1 if options.METHODS[self.method] else self.ensemble
 
 
 def with_overrides(cfg: PipelineConfig, overrides: dict[str, Any]) -> PipelineConfig:

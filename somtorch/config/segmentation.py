@@ -6,9 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from ..constraints import BOOL, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
-
-_SOM = "somtorch.core.som"
+from . import options
+from .constraints import BOOL, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
 
 
 # ----------------------------------------------------------------------------------- step 1a: input
@@ -20,6 +19,10 @@ class FeatureConfig(Validated):
         normalize: ``"image"`` (y, x scaled by the longer image side, d by the same factor after
             ``d_weight``), ``"minmax"`` (each feature to [0, 1], the paper's reading) or ``"none"``.
         d_weight: weight of the disparity feature (2 = disparity counts twice as much as position).
+        d_mode: the disparity feature: ``"raw"`` (d) or ``"plane_residual"`` (d − the verified ground
+            plane's disparity at the pixel, clipped at 0: the height of what protrudes from the support
+            surface, in disparity px; the object step then reads it too). Without a verified plane the
+            feature is d.
         train_stride: 1 = NOR (train on every valid pixel), 10 = OR (every 10th pixel in y and x,
             the paper's runtime-optimised mode); the whole map is always segmented.
         color_weight: append the left image's Y, Cb, Cr (each in [0, 1]) times this weight to
@@ -33,13 +36,15 @@ class FeatureConfig(Validated):
 
     _group: ClassVar[str] = "features"
     _constraints: ClassVar[dict[str, Any]] = {
-        "normalize": Choice("somtorch.disparity.features:NORMALIZATIONS"),
-        "d_weight": POSITIVE, "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
+        "normalize": Choice(options.NORMALIZATIONS),
+        "d_weight": POSITIVE, "d_mode": Choice(options.D_MODES),
+        "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
         "speckle_frac": Interval(0, 1), "reference_pixels": Interval(0, None, integer=True),
     }
 
     normalize: str = "image"
     d_weight: float = 2.0
+    d_mode: str = "raw"
     color_weight: float = 0.0
     train_stride: int = 10
     speckle_frac: float = 0.0
@@ -72,8 +77,8 @@ class SOMConfig(Validated):
 
     _group: ClassVar[str] = "som"
     _constraints: ClassVar[dict[str, Any]] = {
-        "rows": POSITIVE_INT, "cols": POSITIVE_INT, "topology": Choice("somtorch.core.grid:TOPOLOGIES"),
-        "toroidal": BOOL, "init": Choice("somtorch.core.init:INITS"),
+        "rows": POSITIVE_INT, "cols": POSITIVE_INT, "topology": Choice(options.TOPOLOGIES),
+        "toroidal": BOOL, "init": Choice(options.INITS),
     }
 
     rows: int = 8
@@ -104,10 +109,10 @@ class TrainConfig(Validated):
 
     _group: ClassVar[str] = "train"
     _constraints: ClassVar[dict[str, Any]] = {
-        "mode": Choice(f"{_SOM}:MODES"), "epochs": POSITIVE_INT, "lr": POSITIVE,
+        "mode": Choice(options.MODES), "epochs": POSITIVE_INT, "lr": POSITIVE,
         "sigma": Interval(0, None, open_lo=True, optional=True),
-        "lr_decay": Choice("somtorch.core.decay:DECAYS"), "sigma_decay": Choice("somtorch.core.decay:DECAYS"),
-        "neighborhood": Choice("somtorch.core.neighborhood:NEIGHBORHOODS"), "order": Choice(f"{_SOM}:ORDERS"),
+        "lr_decay": Choice(options.DECAYS), "sigma_decay": Choice(options.DECAYS),
+        "neighborhood": Choice(options.NEIGHBORHOODS), "order": Choice(options.ORDERS),
         "batch_size": POSITIVE_INT, "parallel": OneOf(("none", "data", "members")),
     }
     _relations: ClassVar[list[tuple[Any, str]]] = [
@@ -134,6 +139,15 @@ class BaselineConfig(Validated):
     ``n_segments`` (SLIC) None = the SOM's K = rows·cols, so every method splits the map into about
     as many segments; k-means always uses K centres. ``fz_*``: Felzenszwalb's scale, smoothing and
     minimum segment size in px; ``slic_compactness`` suits a [0, 1] disparity image.
+
+    Attributes:
+        kmeans_iterations: Lloyd iterations of method=kmeans.
+        kmeans_init: "kmeans++" or "sample" (K random pixels).
+        n_segments: SLIC's segment count (None = the SOM's K = rows x cols).
+        slic_compactness: SLIC's colour/space trade-off, for a [0, 1] disparity image.
+        fz_scale: Felzenszwalb's scale (larger = larger segments).
+        fz_sigma: Felzenszwalb's Gaussian smoothing before segmenting.
+        fz_min_size: Felzenszwalb's minimum segment size in px.
     """
 
     _group: ClassVar[str] = "baseline"

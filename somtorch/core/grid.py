@@ -17,9 +17,8 @@ import math
 
 import torch
 
+from ..config.options import TOPOLOGIES
 from ..validation import check_choice, check_positive_int
-
-TOPOLOGIES = ("rectangular", "hexagonal")
 _HEX_ROW = math.sqrt(3.0) / 2.0
 
 

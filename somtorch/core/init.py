@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import torch
 
-INITS = ("random", "sample", "pca")
+from ..config.options import INITS
 
 
 def init_random(x: torch.Tensor, k: int, generator: torch.Generator,

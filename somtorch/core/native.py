@@ -14,7 +14,9 @@ with :mod:`ctypes`. It is compiled on the first call with the system C++ compile
 ``c++``) into ``$SOMTORCH_CACHE_DIR`` (default ``$XDG_CACHE_HOME/somtorch/native`` or
 ``~/.cache/somtorch/native``) under a name that hashes the source, the compiler and the flags; an
 ``fcntl`` file lock keeps concurrent processes (pytest-xdist workers) from compiling twice, and the
-library is moved into place atomically. ``-mavx2 -mfma`` are used only when the CPU reports both.
+library is moved into place atomically. ``-mavx2 -mfma`` are used only when the CPU reports both,
+``-mavx512f`` (16 float32 lanes in the search kernels) when it also reports AVX-512 and
+``SOMTORCH_NATIVE_AVX512`` is not ``0``.
 
 ``native_bmu`` returns ``None`` whenever the kernel cannot serve the call — ``SOMTORCH_NATIVE=0``,
 no compiler or a failed build (logged once as a warning), non-CPU tensors, dtypes other than
@@ -48,8 +50,9 @@ logger = logging.getLogger(__name__)
 
 ENV_SWITCH = "SOMTORCH_NATIVE"  # "0" disables the native kernel
 ENV_CACHE = "SOMTORCH_CACHE_DIR"
+ENV_WIDE = "SOMTORCH_NATIVE_AVX512"  # "0": AVX2 vectors even where the CPU has AVX-512
 SOURCE = Path(__file__).resolve().parent / "csrc" / "bmu.cpp"
-ABI = 3  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
+ABI = 4  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
 BASE_FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off")
 BUILD_TIMEOUT_S = 300
 
@@ -119,7 +122,10 @@ def _build() -> Path:
         version = subprocess.run([cxx, "--version"], capture_output=True, text=True, timeout=60).stdout
     except (OSError, subprocess.SubprocessError) as exc:
         raise RuntimeError(f"cannot run the C++ compiler {cxx}: {exc}") from exc
-    isa = ["-mavx2", "-mfma"] if {"avx2", "fma"} <= _cpu_flags() else []
+    flags = _cpu_flags()
+    isa = ["-mavx2", "-mfma"] if {"avx2", "fma"} <= flags else []
+    if isa and "avx512f" in flags and os.environ.get(ENV_WIDE, "1").strip() != "0":
+        isa.append("-mavx512f")  # 16 float32 lanes for the search kernels (csrc/bmu.cpp kSearchBytes)
     variants = [[*BASE_FLAGS, *isa, "-fopenmp"], [*BASE_FLAGS, *isa]]  # without OpenMP: one thread
     src = SOURCE.read_bytes()
     folder = cache_dir()
@@ -167,9 +173,14 @@ def _load() -> ctypes.CDLL:
         # x, x_stride, w, E, N, K, D, sums, counts, nthreads
         fn.argtypes = [p, i64, p, i64, i64, i64, i64, p, p, i32]
         fn.restype = ctypes.c_int
+    for fn in (lib.somtorch_bounded_f32, lib.somtorch_bounded_f64):
+        # x, x_stride, w, E, N, K, D, c, u, l, drift, dmax, rho, alpha, grow, fresh, sums, counts, searched, nthreads
+        fn.argtypes = [p, i64, p, i64, i64, i64, i64, p, p, p, p, p, ctypes.c_double, ctypes.c_double,
+                       ctypes.c_double, i32, p, p, p, i32]
+        fn.restype = ctypes.c_int
     for fn in (lib.somtorch_online_f32, lib.somtorch_online_f64):
-        # w, xs, xs_stride, coef, log_lr, grid_d2, E, S, K, D, nthreads
-        fn.argtypes = [p, p, i64, p, p, p, i64, i64, i64, i64, i32]
+        # w, x, x_stride, idx, idx_stride, coef, log_lr, grid_d2, E, S, K, D, nthreads
+        fn.argtypes = [p, p, i64, p, i64, p, p, p, i64, i64, i64, i64, i32]
         fn.restype = ctypes.c_int
     return lib
 
@@ -288,39 +299,92 @@ def native_accumulate(x: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tens
 
 
 @torch.no_grad()
+def native_bounded(x: torch.Tensor, weight: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor, torch.Tensor],
+                   drift: torch.Tensor | None, slack: tuple[float, float, float]
+                   ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+    """:func:`native_accumulate` that searches only the samples whose bounds do not prove their
+    BMU (see :mod:`somtorch.core.bounds`); None if unsupported.
+
+    Args:
+        state: per member and sample the BMU ``(E, N)`` int64 and the upper / lower distance
+            bounds ``(E, N)`` float64, all contiguous, updated in place.
+        drift: how far each unit moved since the state was valid ``(E, K)`` float64, rounded
+            outwards; None searches every sample (a fresh state).
+        slack: ``(rho, alpha, grow)``: the kernel's relative and absolute distance error, and the
+            outward rounding of a computed distance.
+
+    Shape:
+        returns sums ``(E, K, D)``, counts ``(E, K)`` (the weights' dtype) and the number of
+        samples each member searched ``(E,)`` int64.
+    """
+    call = _prepare(x, weight, 2)
+    if call is None:
+        return None
+    lib, xc, wc, (e, kk, d, n) = call
+    c, u, lo = state
+    if drift is None:
+        drift_c = torch.zeros(e, kk, dtype=torch.float64)
+    else:
+        drift_c = drift.detach().to(torch.float64).contiguous()
+    dmax = drift_c.amax(1).contiguous()
+    sums = torch.zeros(e, kk, d, dtype=weight.dtype)
+    counts = torch.zeros(e, kk, dtype=torch.long)
+    searched = torch.zeros(e, dtype=torch.long)
+    fn = lib.somtorch_bounded_f32 if x.dtype == torch.float32 else lib.somtorch_bounded_f64
+    rho, alpha, grow = slack
+    rc = fn(xc.data_ptr(), 0 if x.ndim == 2 else n * d, wc.data_ptr(), e, n, kk, d, c.data_ptr(), u.data_ptr(),
+            lo.data_ptr(), drift_c.data_ptr(), dmax.data_ptr(), rho, alpha, grow, int(drift is None),
+            sums.data_ptr(), counts.data_ptr(), searched.data_ptr(), kernel_threads())
+    if rc != 0:
+        _note(_refusal(rc, e, n, kk, d))
+        return None
+    return sums, counts.to(weight.dtype), searched
+
+
+@torch.no_grad()
 def native_online(weight: torch.Tensor, xs: torch.Tensor, coef: torch.Tensor, log_lr: torch.Tensor,
-                  grid_d2: torch.Tensor) -> bool:
+                  grid_d2: torch.Tensor, idx: torch.Tensor | None = None) -> bool:
     """Gaussian online rule for S steps, in place on ``weight``; False (nothing done) if unsupported.
 
     The kernel runs :func:`somtorch.core.training.online_block`'s operations in the same precision
-    and order, one compiled loop per member (threads take whole members, so member e equals its
-    solo map bitwise); the exponential is the C library's, so the weights agree with the torch
-    path to rounding.
+    and order; the exponential is the C library's, so the weights agree with the torch path to
+    rounding. From 2 members on, 8 float32 (4 float64) members share each vector instruction, and
+    a step whose members share α and σ computes one exponential per distinct grid distance for
+    all of them; member e still equals its solo map bitwise.
 
-    Shape:
-        ``weight`` ``(E, K, D)`` contiguous; ``xs`` ``(1 | E, S, D)``; ``coef`` = −1/(2σ²) and
-        ``log_lr`` = log α, each ``(S, E)``; ``grid_d2`` ``(K, K)``.
+    Args:
+        weight: ``(E, K, D)`` contiguous, updated in place.
+        xs: the samples of the S steps ``(1 | E, S, D)``; with ``idx``, the data ``(N, D)`` or
+            ``(E, N, D)`` they are taken from (no ``(E, S, D)`` copy).
+        coef: −1/(2σ²) per step and member ``(S, E)``.
+        log_lr: log α ``(S, E)``.
+        grid_d2: squared grid distances ``(K, K)``.
+        idx: sample index of every step, ``(1 | E, S)`` in ``[0, N)`` (not checked here), or None.
     """
     if not enabled():
         _note(f"{ENV_SWITCH}=0", logging.INFO)
         return False
     if weight.device.type != "cpu" or weight.dtype not in (torch.float32, torch.float64) \
-            or not weight.is_contiguous() or xs.dtype != weight.dtype:
+            or not weight.is_contiguous() or xs.dtype != weight.dtype or xs.device.type != "cpu":
         _note(f"online rule with weight {weight.dtype} on {weight.device}, samples {xs.dtype}")
         return False
     lib = library()
     if lib is None:
         return False
     e, k, d = weight.shape
-    s = xs.shape[1]
     dt = weight.dtype
-    xc = xs.detach().contiguous()
+    if idx is None:  # the samples in step order: data = xs, index = 0 … S−1
+        idx = torch.arange(xs.shape[1])[None]
+    s = idx.shape[-1]
+    data = xs.detach().contiguous()
+    ic = idx.detach().to(device="cpu", dtype=torch.long).contiguous()
     cc = coef.detach().to(dt).reshape(s, e).contiguous()
     lc = log_lr.detach().to(dt).reshape(s, e).contiguous()
     gc = grid_d2.detach().to(device="cpu", dtype=dt).contiguous()
+    x_stride = 0 if data.ndim == 2 or data.shape[0] == 1 else data.shape[1] * d
     fn = lib.somtorch_online_f32 if dt == torch.float32 else lib.somtorch_online_f64
-    rc = fn(weight.data_ptr(), xc.data_ptr(), 0 if xc.shape[0] == 1 else s * d, cc.data_ptr(),
-            lc.data_ptr(), gc.data_ptr(), e, s, k, d, kernel_threads())
+    rc = fn(weight.data_ptr(), data.data_ptr(), x_stride, ic.data_ptr(), 0 if ic.shape[0] == 1 else s,
+            cc.data_ptr(), lc.data_ptr(), gc.data_ptr(), e, s, k, d, kernel_threads())
     if rc != 0:
         _note(_refusal(rc, e, s, k, d))
         return False

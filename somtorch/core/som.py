@@ -21,6 +21,7 @@ import torch
 from torch import nn
 
 from ..config import SOMConfig, TrainConfig
+from ..config.options import MODES, ORDERS
 from ..validation import check_choice, check_positive, check_positive_int, check_tensor, resolve
 from . import checkpoint
 from .decay import DECAYS, DecayFn
@@ -33,9 +34,7 @@ from .neighborhood import NEIGHBORHOODS, NeighborhoodFn
 from .threads import contended
 from .training import Callback, Order, Schedules, run
 
-MODES = ("online", "batch", "minibatch")
 _T, _S = TrainConfig, SOMConfig  # the defaults of fit (class attributes), declared once in somtorch.config
-ORDERS = ("sequential", "random")
 
 
 def _new_seed() -> int:
@@ -62,6 +61,8 @@ class SOM(nn.Module):
         grid_d2: squared grid distances ``(K, K)``.
         seeds: the members' seeds.
         initialized: whether the weights were set from data, by assignment or by loading.
+        skipped: batch map: per epoch of the last :meth:`fit`, the share of samples whose BMU
+            search the bounds of :mod:`somtorch.core.bounds` skipped (exact either way).
     """
 
     def __init__(self, rows: int, cols: int, dim: int, *, ensemble: int = 1, topology: str = "rectangular",
@@ -105,6 +106,7 @@ class SOM(nn.Module):
         self._plan: tuple[int, int] | None = None  # (epochs done, planned) while partial_fit runs
         self._progress: tuple[int, int] = (0, 0)  # of the current partial_fit schedule
         self._order_state: tuple | None = None  # the random order's current epoch, across partial_fit calls
+        self.skipped: list[float] = []
 
     # ------------------------------------------------------------------ basics
     @property
@@ -332,9 +334,10 @@ class SOM(nn.Module):
             stream_order._epoch, stream_order._perm = cached[1], cached[2]
         # on a busy CPU: no more torch threads than the cores other processes leave free (same bits)
         with contended() if self.weight.device.type == "cpu" else nullcontext():
-            run(self.weight.data, x, mode=mode, steps=steps, batch_size=batch_size, order=stream_order,
-                sched=sched, grid_d2=self.grid_d2, neighborhood=nb, progress=progress, callback=callback,
-                callback_every=callback_every, desc=f"SOM {mode}", offset=offset, total=total)
+            self.skipped = run(self.weight.data, x, mode=mode, steps=steps, batch_size=batch_size,
+                               order=stream_order, sched=sched, grid_d2=self.grid_d2, neighborhood=nb,
+                               progress=progress, callback=callback, callback_every=callback_every,
+                               desc=f"SOM {mode}", offset=offset, total=total)
         self._order_state = ((stream_order.kind, n), stream_order._epoch, stream_order._perm) \
             if self._plan is not None else None
         return self

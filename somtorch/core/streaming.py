@@ -5,6 +5,9 @@ and their count. Both add up over any split of the data, so an epoch can walk th
 (a memory-mapped ``.npy``, a DataLoader, tiles of a map) and, in data-parallel training, through
 the shards of several processes whose sums are then all-reduced (:mod:`somtorch.core.distributed`).
 
+This module only turns tensors, arrays, memory maps and DataLoaders into a chunk source
+(:class:`~somtorch.core.training.Chunks`); the epochs run in the one batch engine of
+:meth:`SOM.fit` (:func:`somtorch.core.training.run`), whose in-memory data is a single chunk.
 Sums are kept in float64 between chunks; each chunk's sums come from the same kernel as
 :meth:`SOM.fit` (``accumulate``). With a single chunk holding all data the result equals
 ``SOM.fit(mode="batch")`` up to the float64 target (``|Δw|`` ≲ 1e-6); with ``partitions`` the
@@ -17,6 +20,7 @@ Memory: one chunk of samples, its BMU indices, and ``E·K·(D + 1)`` float64 sum
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from functools import partial
 from typing import Any, Union
 
 import numpy as np
@@ -26,9 +30,9 @@ from ..config import TrainConfig
 from .decay import DECAYS
 from .grid import default_sigma
 from .neighborhood import NEIGHBORHOODS
-from .training import _member_schedule, accumulate, batch_target
+from .training import Chunks, Schedules, run
 
-__all__ = ["Source", "chunk_rows", "fit_batch_chunked"]
+__all__ = ["Source", "chunk_rows", "chunk_source", "fit_batch_chunked"]
 
 _T = TrainConfig
 
@@ -51,38 +55,42 @@ def chunk_rows(data: torch.Tensor | np.ndarray, chunk_size: int, dtype: torch.dt
         yield t.to(dtype)
 
 
-def _chunks(source: Source, chunk_size: int, dtype: torch.dtype) -> Iterable[torch.Tensor]:
+def _chunks(source: Source, chunk_size: int, weight: torch.Tensor) -> Iterator[torch.Tensor]:
+    """One pass over ``source`` as ``(n, D)`` chunks of the weights' dtype, on their device."""
+    d = weight.shape[-1]
+    if isinstance(source, (torch.Tensor, np.ndarray)):
+        chunks: Iterable[Any] = chunk_rows(source, chunk_size, weight.dtype)
+    else:
+        chunks = source()
+    for c in chunks:
+        chunk = torch.as_tensor(c).to(device=weight.device, dtype=weight.dtype)
+        if chunk.ndim != 2 or chunk.shape[1] != d:
+            raise ValueError(f"a chunk must be (n, {d}); got shape {tuple(chunk.shape)}")
+        yield chunk
+
+
+def _check_source(source: Any) -> None:
     if isinstance(source, (torch.Tensor, np.ndarray)):
         if source.ndim != 2:
             raise ValueError(f"a sample array must be (N, D); got shape {tuple(source.shape)}")
-        return chunk_rows(source, chunk_size, dtype)
-    if callable(source):
-        return (torch.as_tensor(c).to(dtype) for c in source())
-    raise TypeError(f"a source is a tensor, an array or a callable returning chunks; got {type(source).__name__}")
+    elif not callable(source):
+        raise TypeError(f"a source is a tensor, an array or a callable returning chunks; got {type(source).__name__}")
 
 
-def epoch_sums(weight: torch.Tensor, sources: Sequence[Source], chunk_size: int
-               ) -> tuple[torch.Tensor, torch.Tensor, int]:
-    """float64 per-unit sums ``(E, K, D)`` and counts ``(E, K)`` of one pass over ``sources``
-    (each partition summed on its own, the partition totals added in order), and the sample count."""
-    e, k, d = weight.shape
-    total_s = torch.zeros(e, k, d, dtype=torch.float64, device=weight.device)
-    total_c = torch.zeros(e, k, dtype=torch.float64, device=weight.device)
-    seen = 0
+def chunk_source(sources: Source | Sequence[Source], weight: torch.Tensor, *, chunk_size: int = 1 << 20,
+                 all_reduce: Callable[[torch.Tensor], None] | None = None) -> Chunks:
+    """The batch engine's data source for ``sources`` (one :data:`Source` or a list of partitions),
+    read in chunks of ``chunk_size`` rows, sums in float64."""
+    if isinstance(sources, (torch.Tensor, np.ndarray)) or callable(sources):
+        sources = [sources]
+    sources = list(sources)
+    if not sources:
+        raise ValueError("sources is empty")
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be >= 1; got {chunk_size}")
     for source in sources:
-        part_s, part_c = torch.zeros_like(total_s), torch.zeros_like(total_c)
-        for chunk in _chunks(source, chunk_size, weight.dtype):
-            if chunk.ndim != 2 or chunk.shape[1] != d:
-                raise ValueError(f"a chunk must be (n, {d}); got shape {tuple(chunk.shape)}")
-            if chunk.shape[0] == 0:
-                continue
-            s, c = accumulate(chunk.to(weight.device), weight)
-            part_s += s.double()
-            part_c += c.double()
-            seen += int(chunk.shape[0])
-        total_s += part_s
-        total_c += part_c
-    return total_s, total_c, seen
+        _check_source(source)
+    return Chunks([partial(_chunks, src, chunk_size, weight) for src in sources], torch.float64, all_reduce)
 
 
 def fit_batch_chunked(som: Any, sources: Source | Sequence[Source], *, epochs: int = _T.epochs,
@@ -109,17 +117,13 @@ def fit_batch_chunked(som: Any, sources: Source | Sequence[Source], *, epochs: i
     if not som.initialized:
         raise ValueError("initialise the map first (som.initialize(sample) or set its weights): a chunked "
                          "pass has no single data tensor to initialise from")
-    if isinstance(sources, (torch.Tensor, np.ndarray)) or callable(sources):
-        sources = [sources]
-    sources = list(sources)
-    if not sources:
-        raise ValueError("sources is empty")
+    w = som.weight.data
+    source = chunk_source(sources, w, chunk_size=chunk_size, all_reduce=all_reduce)
     if isinstance(epochs, bool) or not isinstance(epochs, int) or epochs < 1:
         raise ValueError(f"epochs must be a positive int; got {epochs!r}")
     s0 = float(default_sigma(som.rows, som.cols) if sigma is None else sigma)
     s1 = float(min(s0, 0.5) if sigma_final is None else sigma_final)
     ens = som.ensemble
-    w = som.weight.data
     p0 = torch.full((ens,), s0, dtype=w.dtype, device=w.device)
     p1 = torch.full((ens,), s1, dtype=w.dtype, device=w.device)
     if sigma_decay not in DECAYS:
@@ -127,22 +131,10 @@ def fit_batch_chunked(som: Any, sources: Source | Sequence[Source], *, epochs: i
     if neighborhood not in NEIGHBORHOODS:
         raise ValueError(f"neighborhood {neighborhood!r}: choose from {sorted(NEIGHBORHOODS)}")
     decay = [DECAYS[sigma_decay]] * ens
-    nb = NEIGHBORHOODS[neighborhood]
-    grid_d2 = som.grid_d2.double()
-    with torch.no_grad():
-        for ep in range(epochs):
-            sig = _member_schedule(decay, p0, p1, ep, ep + 1, epochs)[0]  # the radius of SOM.fit's batch map
-            sums, counts, seen = epoch_sums(w, sources, chunk_size)
-            if all_reduce is not None:
-                all_reduce(sums)
-                all_reduce(counts)
-            elif seen == 0:
-                raise ValueError("the sources yielded no sample in this epoch")
-            target, den = batch_target(sums, counts, sig.double(), grid_d2, nb)
-            reached = (den > 1e-12).unsqueeze(-1)
-            torch.where(reached, target.to(w.dtype), w, out=w)
-            if callback is not None:
-                callback(ep + 1, w)
+    sched = Schedules(p0, p1, decay, p0, p1, decay)  # the batch map reads only the radius
+    every = None if callback is None else (lambda info: callback(info.step, info.weight))
+    run(w, source, mode="batch", steps=epochs, batch_size=1, order=None, sched=sched, grid_d2=som.grid_d2,
+        neighborhood=NEIGHBORHOODS[neighborhood], progress=False, callback=every)
     return som
 
 

@@ -16,17 +16,24 @@ seed would.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+import logging
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import torch
 
+from .bounds import BmuBounds
 from .decay import DecayFn, schedule
 from .distance import DEFAULT_CHUNK_ELEMENTS, bmu_search
 from .native import native_accumulate, native_online
 from .neighborhood import NeighborhoodFn, gaussian
+from .threads import kernel_threads
+
+log = logging.getLogger(__name__)
 
 BLOCK_STEPS = 4096  # steps whose samples and schedule values are prepared at once (online rule)
+USE_BOUNDS = True  # the in-memory batch map may skip BMU searches its bounds prove (exact either way)
 
 
 @dataclass
@@ -40,6 +47,8 @@ class StepInfo:
         lr: learning rate at this step, ``(E,)``.
         sigma: radius at this step, ``(E,)``.
         weight: the current weights ``(E, K, D)`` (a live view: copy it to keep it).
+        skipped: batch map: share of the samples whose BMU search the bounds skipped in this step
+            (:mod:`somtorch.core.bounds`); 0 otherwise.
     """
 
     step: int
@@ -48,6 +57,7 @@ class StepInfo:
     lr: torch.Tensor
     sigma: torch.Tensor
     weight: torch.Tensor
+    skipped: float = 0.0
 
 
 Callback = Callable[[StepInfo], None]
@@ -109,13 +119,42 @@ class Order:
         while pos < stop:
             epoch, off = divmod(pos, self.n)
             if epoch != self._epoch:
-                self._perm = torch.stack([torch.randperm(self.n, generator=g, device=self.device)
-                                          for g in self.generators])  # (E, N)
+                # int32 on the CPU where N allows: the same permutations as int64 (torch's CPU
+                # Fisher–Yates does not depend on the dtype), half the memory traffic
+                dtype = torch.int32 if self.device.type == "cpu" and self.n < 2 ** 31 else torch.long
+                self._perm = _permutations(self.generators, self.n, dtype, self.device)  # (E, N)
                 self._epoch = epoch
             take = min(stop - pos, self.n - off)
             parts.append(self._perm[:, off:off + take])
             pos += take
-        return torch.cat(parts, dim=1)
+        return torch.cat(parts, dim=1).long()
+
+
+PERM_THREAD_ELEMENTS = 1 << 20  # E·N from which the members' permutations are drawn on several threads
+
+
+def _permutations(generators: list[torch.Generator], n: int, dtype: torch.dtype,
+                  device: torch.device) -> torch.Tensor:
+    """One ``randperm(n)`` per generator, each drawn into its row of an ``(E, n)`` table.
+
+    On the CPU, large tables are drawn by ``kernel_threads()`` Python threads (torch releases the
+    GIL inside ``randperm``); each row still comes from its own generator alone, so the table is
+    the same whatever the thread count.
+    """
+    out = torch.empty(len(generators), n, dtype=dtype, device=device)
+    jobs = list(zip(generators, out))
+
+    def draw(job: tuple[torch.Generator, torch.Tensor]) -> None:
+        torch.randperm(n, generator=job[0], out=job[1])
+
+    workers = min(kernel_threads(), len(jobs)) if device.type == "cpu" and out.numel() >= PERM_THREAD_ELEMENTS else 1
+    if workers > 1:
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(draw, jobs))
+    else:
+        for job in jobs:
+            draw(job)
+    return out
 
 
 def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
@@ -129,19 +168,23 @@ def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
 
 # ----------------------------------------------------------------------------- update rules
 def online_block(weight: torch.Tensor, xs: torch.Tensor, lr: torch.Tensor, sigma: torch.Tensor,
-                 grid_d2: torch.Tensor, neighborhood: NeighborhoodFn) -> None:
+                 grid_d2: torch.Tensor, neighborhood: NeighborhoodFn, idx: torch.Tensor | None = None) -> None:
     """Apply the online rule for S consecutive steps, in place.
 
     Shape:
-        ``weight`` ``(E, K, D)``; ``xs`` ``(1 | E, S, D)``; ``lr``, ``sigma`` ``(S, E)``;
+        ``weight`` ``(E, K, D)``; ``xs`` ``(1 | E, S, D)`` — or, with ``idx`` ``(1 | E, S)``, the data
+        ``(N, D)`` or ``(E, N, D)`` whose rows ``idx`` the steps use; ``lr``, ``sigma`` ``(S, E)``;
         ``grid_d2`` ``(K, K)``.
     """
     if neighborhood is gaussian:
         # h = α exp(−d²/2σ²) = exp(log α + d² · (−1/2σ²)): two kernels per step instead of four
         coef = (-0.5 / (sigma * sigma)).unsqueeze(-1)  # (S, E, 1)
         log_lr = torch.log(lr).unsqueeze(-1)  # (S, E, 1)
-        if native_online(weight.data, xs, coef, log_lr, grid_d2):  # the compiled loop (CPU)
+        if native_online(weight.data, xs, coef, log_lr, grid_d2, idx):  # the compiled loop (CPU)
             return
+    if idx is not None:
+        xs = _take(xs, idx)  # (1 | E, S, D)
+    if neighborhood is gaussian:
         if weight.shape[0] == 1 and weight.device.type == "cpu":
             _online_solo_cpu(weight[0], xs[0], coef.view(-1), log_lr.view(-1), grid_d2)
             return
@@ -209,7 +252,11 @@ def batch_target(sums: torch.Tensor, counts: torch.Tensor, sigma: torch.Tensor, 
         ``sums`` ``(E, K, D)``, ``counts`` ``(E, K)``, ``sigma`` ``(E,)`` → target ``(E, K, D)`` and
         the denominator ``(E, K)`` (0 where no sample reaches the unit).
     """
-    h = neighborhood(grid_d2.unsqueeze(0), sigma.view(-1, 1, 1))  # (E, K, K), symmetric
+    e = sigma.shape[0]
+    if e > 1 and bool((sigma == sigma[0]).all()):  # one radius for the ensemble: one (K, K) table
+        h = neighborhood(grid_d2.unsqueeze(0), sigma[:1].view(1, 1, 1)).expand(e, -1, -1)  # (E, K, K)
+    else:
+        h = neighborhood(grid_d2.unsqueeze(0), sigma.view(-1, 1, 1))  # (E, K, K), symmetric
     # one batched matrix product for numerators and denominators (the counts ride along as an
     # extra column): no (E, K, K, D) intermediate, so a 16 x 16 ensemble costs what its members
     # do; every member is its own product of the batch, so member e equals the solo map bitwise
@@ -219,9 +266,21 @@ def batch_target(sums: torch.Tensor, counts: torch.Tensor, sigma: torch.Tensor, 
     return num / den.clamp_min(torch.finfo(den.dtype).tiny).unsqueeze(-1), den
 
 
+def _apply(weight: torch.Tensor, target: torch.Tensor, den: torch.Tensor, lr: torch.Tensor | None) -> None:
+    """``weight`` ← target (``lr`` None) or ``weight + lr (target − weight)``, where some sample
+    reaches the unit (``den`` > 0); in place. Shape: ``(E, K, D)``, ``den`` ``(E, K)``, ``lr`` ``(E,)``."""
+    reached = (den > 1e-12).unsqueeze(-1)
+    if lr is None:
+        torch.where(reached, target.to(weight.dtype), weight, out=weight)
+    else:
+        delta = torch.where(reached, target - weight, torch.zeros_like(weight))
+        weight.addcmul_(lr.view(-1, 1, 1), delta)
+
+
 def batch_step(weight: torch.Tensor, x: torch.Tensor, lr: torch.Tensor | None, sigma: torch.Tensor,
                grid_d2: torch.Tensor, neighborhood: NeighborhoodFn) -> None:
-    """One batch-map step on ``x`` (all data, or one mini-batch with learning rate ``lr``), in place.
+    """One batch-map step on the samples ``x`` held in memory (a mini-batch with learning rate
+    ``lr``, or all data with ``lr`` None), in place.
 
     Shape:
         ``weight`` ``(E, K, D)``, ``x`` ``(N, D)`` or ``(E, N, D)``, ``lr`` ``(E,)`` or None (= 1),
@@ -229,12 +288,94 @@ def batch_step(weight: torch.Tensor, x: torch.Tensor, lr: torch.Tensor | None, s
     """
     sums, counts = accumulate(x, weight)
     target, den = batch_target(sums, counts, sigma, grid_d2, neighborhood)
-    reached = (den > 1e-12).unsqueeze(-1)
-    if lr is None:
-        torch.where(reached, target, weight, out=weight)
-    else:
-        delta = torch.where(reached, target - weight, torch.zeros_like(weight))
-        weight.addcmul_(lr.view(-1, 1, 1), delta)
+    _apply(weight, target, den, lr)
+
+
+@dataclass
+class Chunks:
+    """The samples of one batch-map epoch as chunks: the data source of the batch engine.
+
+    In-memory data is one chunk (:meth:`of`); :mod:`somtorch.core.streaming` builds chunk sources
+    from memory maps, arrays and DataLoaders, and :mod:`somtorch.core.distributed` adds the
+    all-reduce of data-parallel training.
+
+    Attributes:
+        parts: partitions, each a callable returning a fresh iterable of chunks ``(n, D)`` or
+            ``(E, n, D)`` per epoch; each partition's sums are formed on their own and the
+            partition totals added in order (the order in which an all-reduce of two processes adds them).
+        stats_dtype: dtype of the sums carried between chunks and of the batch-map target (None =
+            the weights' dtype, which an in-memory epoch uses; float64 for many chunks).
+        all_reduce: called in place on the epoch's sums and counts before the update.
+        bounds: per chunk, the bound state that lets the BMU search skip samples across epochs
+            (:class:`~somtorch.core.bounds.BmuBounds`); only for sources that yield the same chunks
+            every epoch (None: no bounds).
+    """
+
+    parts: Sequence[Callable[[], Iterable[torch.Tensor]]]
+    stats_dtype: torch.dtype | None = None
+    all_reduce: Callable[[torch.Tensor], None] | None = None
+    bounds: list[BmuBounds] | None = None
+
+    @classmethod
+    def of(cls, x: torch.Tensor) -> Chunks:
+        """Samples held in memory, ``(N, D)`` or ``(E, N, D)``: one partition of one chunk, with
+        bounds (the same samples every epoch)."""
+        return cls([lambda: (x,)], bounds=[BmuBounds()] if USE_BOUNDS else None)
+
+
+def _add(total: tuple[torch.Tensor, torch.Tensor] | None, sums: torch.Tensor, counts: torch.Tensor,
+         dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    if total is None:  # the first term as it is (0 + s would turn a −0.0 into +0.0)
+        return sums.to(dtype), counts.to(dtype)
+    total[0].add_(sums.to(dtype))
+    total[1].add_(counts.to(dtype))
+    return total
+
+
+def batch_epoch(weight: torch.Tensor, source: Chunks, sigma: torch.Tensor, grid_d2: torch.Tensor,
+                neighborhood: NeighborhoodFn, remaining: int = 1) -> float:
+    """One epoch of Kohonen's batch map over every chunk of ``source``, in place; returns the share
+    of BMU searches the bounds skipped (0 without bounds). ``remaining``: epochs left in the
+    schedule, this one included (the bounds start only when enough remain to repay the start).
+
+    Shape:
+        ``weight`` ``(E, K, D)``, ``sigma`` ``(E,)``, ``grid_d2`` ``(K, K)``.
+
+    Raises:
+        ValueError: the epoch saw no sample (and there is no all-reduce to bring any).
+    """
+    dt = source.stats_dtype or weight.dtype
+    total, seen, skipped, i = None, 0, 0.0, 0
+    for part in source.parts:
+        sub = None
+        for chunk in part():
+            if chunk.shape[-2] == 0:
+                continue
+            stats, bounds = None, source.bounds[i] if source.bounds and i < len(source.bounds) else None
+            if bounds is not None and bounds.plan(chunk, weight, remaining):
+                stats = bounds.accumulate(chunk, weight)  # None: the kernel cannot serve
+                skipped += bounds.skipped * chunk.shape[-2] if stats is not None else 0.0
+            i += 1
+            stats = stats or accumulate(chunk, weight)
+            if bounds is not None:
+                bounds.counts = stats[1]
+            sub = _add(sub, *stats, dt)
+            seen += int(chunk.shape[-2])
+        if sub is not None:
+            total = _add(total, *sub, dt)
+    if total is None:
+        e, k, d = weight.shape
+        total = (torch.zeros(e, k, d, dtype=dt, device=weight.device),
+                 torch.zeros(e, k, dtype=dt, device=weight.device))
+    sums, counts = total
+    if source.all_reduce is not None:
+        source.all_reduce(sums)
+        source.all_reduce(counts)
+    elif seen == 0:
+        raise ValueError("the sources yielded no sample in this epoch")
+    target, den = batch_target(sums, counts, sigma.to(dt), grid_d2.to(dt), neighborhood)
+    _apply(weight, target, den, None)
+    return skipped / max(seen, 1)
 
 
 # ----------------------------------------------------------------------------- the engine
@@ -250,36 +391,48 @@ def _blocks(total: int, size: int, every: int | None) -> Iterator[tuple[int, int
         start = stop
 
 
-def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_size: int,
+def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int, batch_size: int,
         order: Order, sched: Schedules, grid_d2: torch.Tensor, neighborhood: NeighborhoodFn,
         progress: bool = True, callback: Callback | None = None, callback_every: int | None = None,
-        desc: str = "SOM", offset: int = 0, total: int | None = None) -> None:
+        desc: str = "SOM", offset: int = 0, total: int | None = None) -> list[float]:
     """Train ``weight`` in place for ``steps`` steps of the given mode (see the module docstring).
 
     ``offset`` / ``total``: the steps are steps ``offset … offset + steps − 1`` of a schedule of
     ``total`` steps (default: the schedule is these ``steps``), so that training in parts
     continues the decay instead of restarting it (:meth:`SOM.partial_fit`).
+
+    ``x``: the samples ``(N, D)`` or ``(E, N, D)``; in batch mode also a :class:`Chunks` source
+    (memory maps, partitions, an all-reduce): the batch map is one engine for all of them.
+
+    Returns the share of samples whose BMU search the bounds skipped, per step (batch mode; empty
+    for the other modes).
     """
     from tqdm.auto import tqdm
 
-    n = x.shape[-2]
+    if mode == "batch" and isinstance(x, torch.Tensor):
+        x = Chunks.of(x)
+    n = 1 if isinstance(x, Chunks) else x.shape[-2]  # batch mode: a step is an epoch
     planned = steps if total is None else total
     if offset < 0 or offset + steps > planned:
         raise ValueError(f"steps {offset}..{offset + steps} lie outside the schedule of {planned} steps")
-    per_step = {"online": 1, "batch": n, "minibatch": batch_size}[mode]
+    per_step = {"online": 1, "batch": 1, "minibatch": batch_size}[mode]
     every = callback_every
     block = BLOCK_STEPS if mode == "online" else 1
     cut_every = every if every else (n if mode == "online" else None)
+    skipped: list[float] = []
     bar = tqdm(total=steps, desc=desc, unit="step", disable=not progress, delay=0.5, leave=False)
     try:
         with torch.no_grad():
             for start, stop in _blocks(steps, block, cut_every if callback is not None else None):
                 lr, sigma = sched.values(offset + start, offset + stop, planned)  # (S, E)
                 if mode == "online":
-                    xs = _take(x, order.indices(offset + start, offset + stop))
-                    online_block(weight, xs, lr, sigma, grid_d2, neighborhood)
+                    idx = order.indices(offset + start, offset + stop)  # (1 | E, S)
+                    online_block(weight, x, lr, sigma, grid_d2, neighborhood, idx)
                 elif mode == "batch":
-                    batch_step(weight, x, None, sigma[0], grid_d2, neighborhood)
+                    left = planned - offset - start  # epochs left in the schedule, this one included
+                    skipped.append(batch_epoch(weight, x, sigma[0], grid_d2, neighborhood, left))
+                    log.debug("batch epoch %d: BMU search skipped for %.1f %% of the samples", offset + stop,
+                              100 * skipped[-1])
                 else:
                     xs = _take(x, order.indices((offset + start) * batch_size, (offset + stop) * batch_size))
                     if xs.shape[0] == 1 and x.ndim == 2:
@@ -292,6 +445,8 @@ def run(weight: torch.Tensor, x: torch.Tensor, *, mode: str, steps: int, batch_s
                     fire = (stop * per_step) // n > (start * per_step) // n
                 if callback is not None and (fire or stop == steps):
                     callback(StepInfo(step=stop, total=steps, epoch=stop * per_step / n,
-                                      lr=lr[-1], sigma=sigma[-1], weight=weight))
+                                      lr=lr[-1], sigma=sigma[-1], weight=weight,
+                                      skipped=skipped[-1] if mode == "batch" else 0.0))
     finally:
         bar.close()
+    return skipped

@@ -18,16 +18,10 @@ from somtorch.disparity.io import (
     read_pfm,
     write_pfm,
 )
-from somtorch.disparity.scene import (
-    EMBEDDED_SCENES,
-    Camera,
-    ObjectInfo,
-    Scene,
-    load_scene,
-    parse_middlebury_calib,
-    read_middlebury_camera,
-    scene_from_arrays,
-)
+from somtorch.disparity.camera import Camera, read_middlebury_camera
+from somtorch.disparity.io import parse_middlebury_calib
+from somtorch.disparity.loading import EMBEDDED_SCENES, load_scene
+from somtorch.disparity.scene import ObjectInfo, Scene, scene_from_arrays
 from somtorch.disparity.stereo import SGBM_MODES, SGBMParams, compute_disparity, scene_from_stereo
 
 __all__ = [

@@ -3,7 +3,7 @@
 :class:`Camera` holds the left view's pinhole parameters and the stereo baseline
 (``Z = baseline * focal_px / (d + doffs)``). :func:`read_middlebury_camera` reads a Middlebury/ETH3D
 ``calib.txt``; the private ``_<layout>_camera(folder, hw)`` loaders give
-:func:`~somtorch.disparity.scene.load_scene` the camera of each known folder layout, checking the
+:func:`~somtorch.disparity.loading.load_scene` the camera of each known folder layout, checking the
 calibration's image size against the disparity's and raising
 :class:`~somtorch.validation.DataFileError` naming the file.
 """

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import torch
 
 from ..config import FeatureConfig
+from ..config.options import D_MODES, NORMALIZATIONS  # noqa: F401 (D_MODES: FeatureConfig.d_mode)
 from ..validation import check_choice, check_positive, check_positive_int, check_tensor
 
-NORMALIZATIONS = ("image", "minmax", "none")
 _F = FeatureConfig  # the defaults of make_features, declared once in somtorch.config
 
 
@@ -110,6 +110,7 @@ def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: st
         raise ValueError(f"valid has shape {tuple(valid.shape)} but disparity has {tuple(disparity.shape)}")
     check_choice("normalize", normalize, NORMALIZATIONS)
     check_positive("d_weight", d_weight)
+    check_positive("color_weight", color_weight, allow_zero=True)
     h, w = disparity.shape
     usable = valid & torch.isfinite(disparity) & (disparity >= 0)
     n = int(usable.sum())
@@ -117,38 +118,81 @@ def make_features(disparity: torch.Tensor, valid: torch.Tensor, *, normalize: st
         raise ValueError("the disparity map has no valid, finite, non-negative pixel: nothing to train on")
     yx = usable.nonzero()  # (N, 2), row-major
     d = torch.masked_select(disparity, usable)  # = disparity[usable] (row-major), 2-3x faster
-    if normalize == "none":
-        offset = torch.zeros(3, dtype=torch.float64)
-        scale = torch.tensor([1.0, 1.0, d_weight], dtype=torch.float64)
-    else:
-        d_lo, d_hi = float(d.min()), float(d.max())
-        d_span = max(d_hi - d_lo, 1e-6)
-        if normalize == "image":
-            side = float(max(h, w) - 1 or 1)
-            offset = torch.tensor([0.0, 0.0, d_lo], dtype=torch.float64)
-            scale = torch.tensor([1.0 / side, 1.0 / side, d_weight / d_span], dtype=torch.float64)
-        else:
-            y_lo, y_hi = float(yx[0, 0]), float(yx[-1, 0])  # row-major: first and last rows
-            cols = usable.any(0).nonzero()
-            x_lo, x_hi = float(cols[0, 0]), float(cols[-1, 0])
-            offset = torch.tensor([y_lo, x_lo, d_lo], dtype=torch.float64)
-            span = torch.tensor([y_hi - y_lo, x_hi - x_lo, d_span], dtype=torch.float64).clamp_min(1e-6)
-            scale = torch.tensor([1.0, 1.0, d_weight], dtype=torch.float64) / span
-    check_positive("color_weight", color_weight, allow_zero=True)
-    cols = [yx[:, 0], yx[:, 1], d]
+    y_range = x_range = d_range = None
+    if normalize != "none":
+        d_range = (float(d.min()), float(d.max()))
+        y_range = (int(yx[0, 0]), int(yx[-1, 0]))  # row-major: first and last rows
+        cols = usable.any(0).nonzero()
+        x_range = (int(cols[0, 0]), int(cols[-1, 0]))
+    offset, scale = feature_scaling((h, w), normalize=normalize, d_weight=d_weight, d_range=d_range,
+                                    y_range=y_range, x_range=x_range)
+    columns = [yx[:, 0], yx[:, 1], d]
     if color_weight > 0:
         if image is None:
             raise ValueError("color_weight > 0 needs the left image (the scene has none): set color_weight=0")
         check_tensor("image", image, ndim=3, dtype=torch.uint8)
         if tuple(image.shape) != (3, h, w):
             raise ValueError(f"image has shape {tuple(image.shape)}; (3, {h}, {w}) expected")
-        cols += list(ycbcr(image[:, usable]))
+        columns += list(ycbcr(image[:, usable]))
         offset = torch.cat([offset, torch.zeros(3, dtype=torch.float64)])
         scale = torch.cat([scale, torch.full((3,), float(color_weight), dtype=torch.float64)])
-    feats = torch.empty(n, len(cols), dtype=dtype)
-    for j, col in enumerate(cols):  # column-wise: no (N, D) float64 temporaries
-        torch.mul(col.to(dtype) - float(offset[j]), float(scale[j]), out=feats[:, j])
+    feats = pixel_features(columns, offset, scale, dtype)
     return Features(feats, yx, offset.to(dtype), scale.to(dtype), (h, w), h * w - n, 1, usable)
+
+
+def relative_disparity(disparity: torch.Tensor, reference: torch.Tensor) -> torch.Tensor:
+    """``disparity − reference`` clipped at 0: the height of what stands on a support surface whose
+    disparity is ``reference`` (``features.d_mode="plane_residual"``), in disparity px. Pixels behind
+    the surface (matching noise, or what it does not hide) get 0, the surface's own level.
+
+    Shape:
+        ``disparity``, ``reference`` ``(H, W)`` → ``(H, W)``, the dtype of ``disparity``.
+
+    >>> relative_disparity(torch.tensor([[3.0, 5.0]]), torch.tensor([[4.0, 4.0]]))
+    tensor([[0., 1.]])
+    """
+    return (disparity - reference.to(disparity)).clamp_min_(0)
+
+
+def feature_scaling(shape: tuple[int, int], *, normalize: str = _F.normalize, d_weight: float = _F.d_weight,
+                    d_range: tuple[float, float] | None = None, y_range: tuple[int, int] | None = None,
+                    x_range: tuple[int, int] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """The affine map ``features = (pixel units − offset) · scale`` of (y, x, d) for ``normalize``.
+
+    Args:
+        shape: ``(H, W)`` of the map.
+        d_range: smallest and largest usable disparity (px); needed unless ``normalize="none"``.
+        y_range, x_range: first and last row / column holding a usable pixel; needed for ``"minmax"``.
+
+    Shape:
+        returns ``offset``, ``scale`` ``(3,)`` float64.
+
+    Every path that turns pixels into features (:func:`make_features` on a whole map,
+    :mod:`somtorch.large` on blocks of a memory map) takes its scaling from here.
+    """
+    if normalize == "none":
+        return torch.zeros(3, dtype=torch.float64), torch.tensor([1.0, 1.0, d_weight], dtype=torch.float64)
+    d_lo, d_hi = d_range
+    d_span = max(d_hi - d_lo, 1e-6)
+    if normalize == "image":
+        side = float(max(shape) - 1 or 1)
+        return (torch.tensor([0.0, 0.0, d_lo], dtype=torch.float64),
+                torch.tensor([1.0 / side, 1.0 / side, d_weight / d_span], dtype=torch.float64))
+    (y_lo, y_hi), (x_lo, x_hi) = y_range, x_range
+    offset = torch.tensor([float(y_lo), float(x_lo), d_lo], dtype=torch.float64)
+    span = torch.tensor([float(y_hi - y_lo), float(x_hi - x_lo), d_span], dtype=torch.float64).clamp_min(1e-6)
+    return offset, torch.tensor([1.0, 1.0, d_weight], dtype=torch.float64) / span
+
+
+def pixel_features(columns: list[torch.Tensor], offset: torch.Tensor, scale: torch.Tensor,
+                   dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    """Feature vectors ``(N, D)`` from D pixel-unit columns ``(N,)`` each (y px, x px, d px, …):
+    column j is ``(c_j − offset_j) · scale_j`` in ``dtype``, computed column by column (no
+    ``(N, D)`` float64 temporary); ``offset``, ``scale`` ``(D,)``."""
+    feats = torch.empty(int(columns[0].shape[0]), len(columns), dtype=dtype)
+    for j, col in enumerate(columns):
+        torch.mul(col.to(dtype) - float(offset[j]), float(scale[j]), out=feats[:, j])
+    return feats
 
 
 def ycbcr(rgb: torch.Tensor) -> torch.Tensor:

@@ -129,8 +129,9 @@ def _read_tiff_disparity(path: Path, scale: float | None) -> np.ndarray:
         raise DataFileError(path, f"{img.shape[1]}x{img.shape[0]} px is above the limit of {MAX_PIXELS:,} "
                                   "(SOMTORCH_MAX_PIXELS)")
     if not np.issubdtype(img.dtype, np.floating) and scale is None:
-        raise DataFileError(path, f"an integer ({img.dtype}) TIFF has no standard disparity encoding; pass "
-                                  "scale= (stored value * scale = pixels)")
+        raise DataFileError(path, f"an integer ({img.dtype}) TIFF has no standard disparity encoding; give "
+                                  "data.disparity_scale= on the command line (scale= in read_disparity; "
+                                  "stored value * scale = pixels)")
     return img
 
 
@@ -144,8 +145,9 @@ def _read_png_disparity(path: Path, scale: float | None) -> np.ndarray:
     if img.dtype == np.uint8 and scale is None:
         raise DataFileError(path, "8-bit PNG has no standard disparity encoding (KITTI and OAK-D store "
                                   "uint16 with d = value / 256); it is usually a visualisation whose scale "
-                                  "is lost. If it really holds disparities, pass scale= explicitly "
-                                  "(e.g. scale=1.0 for integer pixels)")
+                                  "is lost. If it really holds disparities, give the scale explicitly: "
+                                  "data.disparity_scale=1.0 on the command line for integer pixels "
+                                  "(scale=1.0 in read_disparity)")
     if img.dtype not in (np.uint8, np.uint16):
         raise DataFileError(path, f"unsupported PNG sample type {img.dtype}; expected uint16 (or uint8 "
                                   "with an explicit scale)")

@@ -9,7 +9,8 @@ the code instead of beside the data::
                   "polygons": [[[437, 205], [455, 195], ...]],
                   "exclude": [[[...]]]}]}
 
-``exclude`` (optional) are polygons cut out of the object (see-through gaps). Where two objects'
+``exclude`` (optional) are polygons cut out of the object (see-through gaps). An object's polygons
+are united (overlapping pieces do not cancel), and so are its exclusions. Where two objects'
 polygons overlap, the lower id wins (objects are painted from the highest id down, so the main
 object, id 1 by convention, is drawn last: label it around what occludes it, not through it).
 """
@@ -61,9 +62,13 @@ def read_polygon_labels(path: str | Path, hw: tuple[int, int]) -> tuple[torch.Te
         if not isinstance(name, str):
             raise DataFileError(path, f"{where}.name must be a string")
         mask = np.zeros((h, w), dtype=np.uint8)
-        cv2.fillPoly(mask, _polygons(o.get("polygons"), path, f"{where}.polygons", h, w), 1)
+        # one fillPoly per polygon: a single call with several polygons fills by parity, so two
+        # overlapping pieces of one object would cancel where they overlap
+        for poly in _polygons(o.get("polygons"), path, f"{where}.polygons", h, w):
+            cv2.fillPoly(mask, [poly], 1)
         if o.get("exclude"):
-            cv2.fillPoly(mask, _polygons(o["exclude"], path, f"{where}.exclude", h, w), 0)
+            for poly in _polygons(o["exclude"], path, f"{where}.exclude", h, w):
+                cv2.fillPoly(mask, [poly], 0)
         if not mask.any():
             raise DataFileError(path, f"{where} ({name}) covers no pixel")
         masks.append((oid, mask.astype(bool)))

@@ -1,10 +1,9 @@
 """One scene description (disparity + valid mask, left image, instance map, camera) for every data set.
 
-:func:`load_scene` is the single entry point: an embedded scene name (``"motorcycle"``), a folder in
-one of the known layouts (Middlebury/ETH3D, KITTI devkit, SceneFlow, OAK-D; see
-``../shared/data/README.md``), or a single disparity file. Files are validated against each other
-(sizes, ids) before a :class:`Scene` is built; every problem raises
-:class:`~somtorch.validation.DataFileError` naming the file.
+The readers that build scenes from files live one layer up, in :mod:`somtorch.disparity.loading`
+(:func:`~somtorch.disparity.loading.load_scene`, also exported by :mod:`somtorch.disparity`): an
+embedded scene name (``"motorcycle"``), a folder in one of the known layouts, or a single disparity
+file, validated against each other before a :class:`Scene` is built.
 """
 
 from __future__ import annotations
@@ -21,19 +20,15 @@ from somtorch.disparity.io import parse_middlebury_calib
 from somtorch.validation import check_tensor
 
 __all__ = [
-    "EMBEDDED_SCENES",
     "Camera",
     "ObjectInfo",
     "Scene",
-    "load_scene",
     "parse_middlebury_calib",
     "read_middlebury_camera",
     "scene_from_arrays",
 ]
 
 log = logging.getLogger(__name__)
-
-"""Scene names :func:`load_scene` serves without any file."""
 
 
 @dataclass(frozen=True)
@@ -241,9 +236,3 @@ def _infer_object_info(objects: torch.Tensor) -> list[ObjectInfo]:
     ids = sorted(_object_ids(objects))
     return [ObjectInfo(id=i, name=f"object_{i}", main=i == 1) for i in ids]
 
-
-# ------------------------------------------------------------------------------------------ load_scene
-
-
-# the loaders live in somtorch.disparity.loading (they build Scenes); re-exported here, where users look
-from somtorch.disparity.loading import EMBEDDED_SCENES, load_scene  # noqa: E402

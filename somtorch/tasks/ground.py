@@ -11,6 +11,16 @@ top of the image) is rejected and None returned. With ``constrained`` (the defau
 constraints of the RANSAC model: estimated on a sample of the whole map for every strong
 hypothesis, so the best plane that satisfies them is found instead of the best plane being
 refused (which made the verdict on a real floor near a threshold depend on the seed).
+
+That is the ``"position"`` rule (``GroundConfig.rule``): it recognises a floor by where a forward
+camera sees it. The ``"support"`` rule recognises it by what it supports, at any camera pitch — a
+floor filling the frame of a camera looking down, a table top, a slope: RANSAC on the whole map, no
+test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels,
+have nothing substantial behind it (``max_below_frac``, as for every rule) and every image-connected
+piece of the pixels above it (nearer than its band, where it is in view) must be a compact
+protrusion of at most ``max_protrusion_frac`` of the pixels. ``"either"`` accepts a plane that
+passes one of the two (RANSAC on the lower half, as the position rule). ``foot_frac`` then takes
+the feet of the protrusions out of the mask (:func:`protrusion_feet`).
 """
 
 from __future__ import annotations
@@ -20,12 +30,14 @@ from dataclasses import dataclass, field
 import torch
 
 from ..config import GroundConfig
+from ..config.options import GROUND_RULES as RULES
 from ..validation import check_tensor
 
 
 @dataclass
 class GroundPlane:
-    """A fitted ground plane ``d = a·x + b·y + c`` and its inlier mask ``(H, W)``."""
+    """A fitted ground plane ``d = a·x + b·y + c`` and its inlier mask ``(H, W)``; ``support``: the
+    support test verified it (rules ``"support"`` and ``"either"``), not only the position test."""
 
     a: float
     b: float
@@ -33,6 +45,7 @@ class GroundPlane:
     tol: float
     mask: torch.Tensor
     inlier_frac: float
+    support: bool = False
 
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
@@ -47,7 +60,8 @@ class GroundPlane:
         return self._cache[key]
 
     def as_dict(self) -> dict:
-        return {"a": self.a, "b": self.b, "c": self.c, "tol": self.tol, "inlier_frac": self.inlier_frac}
+        return {"a": self.a, "b": self.b, "c": self.c, "tol": self.tol, "inlier_frac": self.inlier_frac,
+                "support": self.support}
 
 
 def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundConfig | None = None) -> GroundPlane | None:
@@ -76,7 +90,8 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     tol = max(cfg.tol_px, cfg.tol_frac * span)
     g = torch.Generator().manual_seed(cfg.seed)
     lower = ok.clone()
-    lower[: h // 2] = False
+    if cfg.rule != "support":  # where a forward camera sees its floor
+        lower[: h // 2] = False
     yx = lower.nonzero()
     if yx.shape[0] < 10:
         return None
@@ -93,7 +108,8 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     coef = torch.zeros(cfg.iterations, 3, dtype=torch.float64)
     coef[good] = torch.linalg.solve(A[good], p[good][..., 2:]).squeeze(-1)  # (a, b, c)
     min_b = cfg.min_slope_frac * span / h
-    plausible = good & (coef[:, 1] >= min_b) & (coef[:, 0].abs() <= coef[:, 1] * w / h)
+    oriented = (coef[:, 1] >= min_b) & (coef[:, 0].abs() <= coef[:, 1] * w / h)  # position rule
+    plausible = good & oriented if cfg.rule == "position" else good
     if not bool(plausible.any()):
         return None
     # inlier counts of every hypothesis in float32 (disparities of a few hundred px, a band of at
@@ -107,7 +123,7 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
         allyx = ok.nonzero()
         pa = allyx[torch.randint(allyx.shape[0], (min(cfg.sample, allyx.shape[0]),), generator=g)]
         q = torch.stack([pa[:, 1].double(), pa[:, 0].double(), disparity[pa[:, 0], pa[:, 1]].double()], 1)
-        score = score.masked_fill(~_passes_sampled(coef, q, tol, h, cfg), -1)
+        score = score.masked_fill(~_passes_sampled(coef, q, tol, h, oriented, cfg), -1)
     order = torch.argsort(score, descending=True, stable=True)
     for i in order[:cfg.tries if cfg.constrained else 1].tolist():
         if int(score[i]) < 0:
@@ -126,54 +142,119 @@ def _predict(coef: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:
     return c[:, 0:1] * x + c[:, 1:2] * y + c[:, 2:3]
 
 
-def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, cfg: GroundConfig) -> torch.Tensor:
-    """Which hypotheses ``coef`` ``(I, 3)`` pass the inlier, behind and top tests on the sample ``q``
-    ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated)."""
+def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, oriented: torch.Tensor,
+                    cfg: GroundConfig) -> torch.Tensor:
+    """Which hypotheses ``coef`` ``(I, 3)`` pass the tests of ``cfg.rule`` on the sample ``q``
+    ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated;
+    the protrusions need the image and are left to the full map). ``oriented`` ``(I,)``: the
+    hypotheses that pass the position rule's orientation test."""
     pred = _predict(coef, q)  # (I, N)
     d = q[None, :, 2].float()
     inl = (pred - d).abs() < tol
-    ok = inl.float().mean(1) >= cfg.min_inlier_frac
+    share = inl.float().mean(1)
+    ok = share >= cfg.min_inlier_frac
     if cfg.max_below_frac < 1.0:
         seen = pred > tol
         behind = seen & (d < pred - tol)
         ok &= behind.sum(1) <= cfg.max_below_frac * seen.sum(1).clamp_min(1)
+    position = oriented.clone()
     top = q[:, 1] < h // 3
     if bool(top.any()):
-        ok &= inl[:, top].float().mean(1) <= cfg.max_top_frac
-    return ok
+        position &= inl[:, top].float().mean(1) <= cfg.max_top_frac
+    return ok & _either(cfg.rule, position, share >= cfg.support_frac)
+
+
+def _either(rule: str, position, support):
+    """The verdict of ``rule`` from the position and support verdicts (bools or bool tensors)."""
+    return position if rule == "position" else support if rule == "support" else position | support
 
 
 def _verified(best: torch.Tensor, pts: torch.Tensor, disparity: torch.Tensor, ok: torch.Tensor, n_valid: int,
               tol: float, min_b: float, cfg: GroundConfig) -> GroundPlane | None:
     """Hypothesis ``best`` refined by least squares on its inliers among ``pts`` and tested on the
-    full map (slope, inlier share, scene behind it, inliers in the top third), or None."""
-    h, w = disparity.shape
-    # refine by least squares on the inliers of the lower half, then recompute on the full map
+    full map (:func:`verify_plane`) — inlier share and scene behind it for every rule; slope, tilt
+    and inliers in the top third (position rule); inlier share and protrusions (support rule) — or None."""
+    # refine by least squares on the inliers of the sampled pixels, then recompute on the full map
     inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
     if int(inl.sum()) >= 3:
         best = _plane_fit(pts[inl])
-    a, b, c = (float(v) for v in best)
-    if b < min_b or abs(a) > b * w / h:
+    return verify_plane(tuple(float(v) for v in best), disparity, ok, tol, cfg, min_b=min_b, n_valid=n_valid)
+
+
+def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: torch.Tensor, tol: float,
+                 cfg: GroundConfig, *, min_b: float = 0.0, n_valid: int | None = None) -> GroundPlane | None:
+    """The plane ``d = a·x + b·y + c`` (``coef`` = (a, b, c)) with band ``tol`` px as a
+    :class:`GroundPlane` if it passes the tests of ``cfg.rule`` on the map (see the module
+    docstring; ``min_b``: the position rule's least ``b``), else None.
+
+    Shape:
+        ``disparity``, ``ok`` (valid, finite pixels) ``(H, W)``.
+    """
+    if n_valid is None:  # a call from outside: check the inputs once
+        check_tensor("disparity", disparity, ndim=2, floating=True)
+        check_tensor("ok", ok, ndim=2, dtype=torch.bool)
+        n_valid = max(int(ok.sum()), 1)
+    h, w = disparity.shape
+    a, b, c = coef
+    position = b >= min_b and abs(a) <= b * w / h
+    if cfg.rule == "position" and not position:
         return None
     ys = torch.arange(h, dtype=torch.float64)[:, None]
     xs = torch.arange(w, dtype=torch.float64)[None, :]
-    mask = ok & ((a * xs + b * ys + c - disparity.double()).abs() < tol)
+    plane = a * xs + b * ys + c
+    d = disparity.double()
+    mask = ok & ((plane - d).abs() < tol)
     if cfg.slope_rows > 0:
         mask &= _follows_slope(disparity, ok, b, tol, max(1, round(cfg.slope_rows * h)))
     frac = int(mask.sum()) / n_valid
     if frac < cfg.min_inlier_frac:
         return None
+    seen = ok & (plane > tol)  # where the plane is in view
     if cfg.max_below_frac < 1.0:  # share of the pixels where the plane is in view that lie behind it
-        plane = a * xs + b * ys + c
-        seen = ok & (plane > tol)
-        behind = seen & (disparity.double() < plane - tol)
+        behind = seen & (d < plane - tol)
         if int(behind.sum()) > cfg.max_below_frac * max(int(seen.sum()), 1):
             return None
-    # ground is seen below the objects, not above them: few inliers in the top third of the image
-    top = ok[: h // 3]
-    if int(top.sum()) and int(mask[: h // 3].sum()) / int(top.sum()) > cfg.max_top_frac:
+    if position:  # ground is seen below the objects, not above them: few inliers in the top third
+        top = ok[: h // 3]
+        position = not int(top.sum()) or int(mask[: h // 3].sum()) / int(top.sum()) <= cfg.max_top_frac
+    support = cfg.rule != "position" and frac >= cfg.support_frac \
+        and largest_protrusion(seen & (d > plane + tol)) <= cfg.max_protrusion_frac * n_valid
+    if not _either(cfg.rule, position, support):
         return None
-    return GroundPlane(a, b, c, tol, mask, frac)
+    if cfg.foot_frac > 0:  # a refinement of the mask, not evidence against the plane: after the tests
+        mask &= ~protrusion_feet(d - plane, ok, tol, max(1, round(cfg.foot_frac * min(h, w))))
+        frac = int(mask.sum()) / n_valid
+    return GroundPlane(a, b, c, tol, mask, frac, support)
+
+
+def protrusion_feet(residual: torch.Tensor, ok: torch.Tensor, tol: float, radius: int) -> torch.Tensor:
+    """Pixels within ``radius`` px of a protrusion: of a pixel above the plane's band (more than
+    ``tol`` above it) that survives an opening with a 3 × 3 square (a speck of matching noise
+    does not). The band holds the foot of every object standing on the plane — its
+    faces cross the plane's disparity where they meet it — and this takes it out.
+
+    Shape:
+        ``residual`` (disparity − plane, px), ``ok`` ``(H, W)`` → ``(H, W)`` bool.
+    """
+    import cv2
+    import numpy as np
+
+    core = (ok & (residual > tol)).numpy().astype(np.uint8)
+    core = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    return torch.from_numpy(cv2.dilate(core, disc) > 0)
+
+
+def largest_protrusion(above: torch.Tensor) -> int:
+    """Pixels of the largest 8-connected piece of ``above`` ``(H, W)`` bool (0 if empty): what
+    stands on a support surface comes in compact pieces."""
+    import cv2
+    import numpy as np
+
+    if not bool(above.any()):
+        return 0
+    n, _, stats, _ = cv2.connectedComponentsWithStats(above.numpy().astype(np.uint8), connectivity=8)
+    return int(stats[1:, cv2.CC_STAT_AREA].max())
 
 
 def _follows_slope(disparity: torch.Tensor, ok: torch.Tensor, b: float, tol: float, k: int) -> torch.Tensor:

@@ -30,11 +30,9 @@ from dataclasses import dataclass
 import torch
 
 from ..config import AreaConfig
+from ..config.options import LINKS, SELECTIONS, SPREADS
 from ..validation import check_tensor
 
-SELECTIONS = ("nearest", "salient", "all")
-LINKS = ("grid", "image", "both")
-SPREADS = ("range", "robust")
 
 
 @dataclass

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from somtorch.baselines import SUPERPIXELS, superpixel_labels
-from somtorch.disparity.scene import load_scene
+from somtorch.disparity import load_scene
 
 
 @pytest.fixture(scope="module")

@@ -124,10 +124,11 @@ def test_threads_chunks_and_members_do_not_change_the_result(kernel):
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64], ids=["f32", "f64"])
 @pytest.mark.parametrize("member", [False, True], ids=["shared", "member"])
 @pytest.mark.parametrize("k,d", [(28, 3), (1, 2), (6, 1), (9, 7)], ids=["K28-D3", "K1-D2", "K6-D1", "K9-D7"])
-def test_accumulate_equals_the_torch_accumulation_bitwise(kernel, k, d, member, dtype):
+def test_accumulate_equals_the_torch_accumulation_bitwise(kernel, k, d, member, dtype, monkeypatch):
     x, w = _data(3, 1003, k, d, dtype, member, seed=k + d)
-    want_sums, want_counts = accumulate(x, w, chunk_elements=997)  # BMUs + index_add_ in sample order
     sums, counts = native_accumulate(x, w)
+    monkeypatch.setenv(native.ENV_SWITCH, "0")  # accumulate() would call the kernel itself
+    want_sums, want_counts = accumulate(x, w, chunk_elements=997)  # BMUs + index_add_ in sample order
     assert sums.dtype == counts.dtype == dtype and sums.shape == (3, k, d) and counts.shape == (3, k)
     assert torch.equal(sums, want_sums) and torch.equal(counts, want_counts)
     assert int(counts.sum()) == 3 * 1003
@@ -279,6 +280,43 @@ def test_online_rule_equals_the_torch_formulation(kernel, k, d, member, dtype, t
     assert native.native_online(solo, xs[1:2] if member else xs, coef[:, 1:2].contiguous(),
                                 log_lr[:, 1:2].contiguous(), grid_d2)
     assert torch.equal(solo[0], w[1])
+
+
+@pytest.mark.parametrize("dtype,tol", [(torch.float32, 2e-6), (torch.float64, 1e-14)], ids=["f32", "f64"])
+@pytest.mark.parametrize("e", [2, 5, 11, 19])
+@pytest.mark.parametrize("data", ["shared", "member"])
+@pytest.mark.parametrize("grid", ["grid", "arbitrary"])
+def test_online_lanes_equal_solo_runs_bitwise(kernel, dtype, tol, e, data, grid):
+    """Members in vector lanes (E >= 2; 8 float32 / 4 float64 per vector, partly filled last block):
+    every member equals its solo run (E = 1, one member at a time) bit for bit, with steps where the
+    members share α and σ (one exponential table) and steps where each member has its own, an index
+    stream per member into shared or per-member data, and ties in the distances (grid-valued data)."""
+    g = torch.Generator().manual_seed(e)
+    k, d, s, n = 12, 3, 300, 40
+    x = torch.randint(0, 4, (e, n, d) if data == "member" else (n, d), generator=g).to(dtype) / 3
+    idx = torch.randint(0, n, (e, s), generator=g)
+    w0 = torch.randint(0, 4, (e, k, d), generator=g).to(dtype) / 3  # the first steps have exact ties
+    sigma = torch.linspace(2.0, 0.5, s, dtype=dtype)[:, None].repeat(1, e)
+    lr = torch.linspace(0.5, 0.01, s, dtype=dtype)[:, None].repeat(1, e)
+    sigma[s // 3: 2 * s // 3] *= torch.linspace(0.8, 1.2, e, dtype=dtype)  # a stretch of per-member radii
+    coef, log_lr = -0.5 / sigma ** 2, torch.log(lr)
+    rows, cols = torch.meshgrid(torch.arange(3), torch.arange(4), indexing="ij")
+    pos = torch.stack([rows.reshape(-1), cols.reshape(-1)], 1).to(dtype)
+    grid_d2 = ((pos[:, None] - pos[None]) ** 2).sum(-1)
+    if grid == "arbitrary":  # 66 distinct values > 4 K: the kernel fills only the exps its rows need
+        grid_d2 = torch.rand(k, k, generator=g, dtype=dtype) * 9
+        grid_d2 = (grid_d2 + grid_d2.T).fill_diagonal_(0)
+    w = w0.clone()
+    assert native.native_online(w, x, coef, log_lr, grid_d2, idx)
+    for m in range(e):
+        solo = w0[m:m + 1].clone()
+        xm = x[m:m + 1] if data == "member" else x
+        assert native.native_online(solo, xm, coef[:, m:m + 1].contiguous(), log_lr[:, m:m + 1].contiguous(),
+                                    grid_d2, idx[m:m + 1])
+        assert torch.equal(solo[0], w[m]), (m, (solo[0] - w[m]).abs().max())
+    xs = torch.stack([(x[m] if data == "member" else x)[idx[m]] for m in range(e)])  # (E, S, D)
+    ref = _online_torch(w0, xs, coef, log_lr, grid_d2)
+    assert torch.allclose(w, ref, rtol=0, atol=tol), (w - ref).abs().max()
 
 
 def test_online_rule_refuses_nan_weights_and_foreign_dtypes(kernel):

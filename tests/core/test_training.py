@@ -8,6 +8,7 @@ import torch
 from somtorch import SOM
 from somtorch.core.grid import grid_sqdist
 from somtorch.core.neighborhood import bubble, gaussian
+from somtorch.core import training
 from somtorch.core.training import Order, _blocks, accumulate, batch_target, online_block
 
 ROWS, COLS, D = 3, 4, 2
@@ -115,6 +116,16 @@ def test_random_order_is_a_fresh_permutation_per_epoch_and_member():
     assert not torch.equal(idx[0], idx[1])
     seq = Order("sequential", 10, 2, gens, torch.device("cpu")).indices(5, 25)
     assert seq.shape == (1, 20) and torch.equal(seq[0], torch.arange(5, 25) % 10)
+
+
+def test_random_order_is_the_same_drawn_on_threads_and_in_int32(monkeypatch):
+    # the (E, N) table of permutations: int32 rows on worker threads = torch.randperm per generator
+    monkeypatch.setattr(training, "PERM_THREAD_ELEMENTS", 1)
+    monkeypatch.setattr(training, "kernel_threads", lambda: 2)
+    gens = [torch.Generator().manual_seed(s) for s in range(5)]
+    idx = Order("random", 1000, 5, gens, torch.device("cpu")).indices(0, 1000)
+    want = torch.stack([torch.randperm(1000, generator=torch.Generator().manual_seed(s)) for s in range(5)])
+    assert idx.dtype == torch.long and torch.equal(idx, want)
 
 
 def test_blocks_cover_all_steps_and_cut_at_callback_multiples():

@@ -27,6 +27,18 @@ def test_square_polygon_fills_its_pixels(tmp_path):
     assert info[0].name == "box" and info[0].main
 
 
+def test_overlapping_pieces_of_one_object_unite_and_do_not_cancel(tmp_path):
+    a = [[2, 2], [8, 2], [8, 8], [2, 8]]
+    b = [[5, 5], [12, 5], [12, 12], [5, 12]]  # overlaps a in [5..8] x [5..8]
+    holes = [[[3, 3], [6, 3], [6, 6], [3, 6]], [[4, 4], [7, 4], [7, 7], [4, 7]]]  # overlapping exclusions
+    p = _write(tmp_path, [{"id": 1, "name": "two_pieces", "polygons": [a, b], "exclude": holes}], size_hw=[16, 16])
+    objects, _ = read_polygon_labels(p, (16, 16))
+    # the pieces' overlap outside the holes stays filled (one fillPoly call would cancel it)
+    assert int(objects[8, 8]) == 1 and int(objects[8, 5]) == 1 and int(objects[5, 8]) == 1
+    assert int(objects[12, 12]) == 1 and int(objects[2, 2]) == 1
+    assert bool((objects[3:7, 3:7] == 0).all()) and bool((objects[4:8, 4:8] == 0).all())  # both holes cut
+
+
 def test_overlap_goes_to_the_lower_id_and_exclusions_cut(tmp_path):
     p = _write(tmp_path, [
         {"id": 2, "name": "back", "polygons": [[[0, 0], [9, 0], [9, 9], [0, 9]]]},

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from somtorch.disparity.resize import resize_scene
-from somtorch.disparity.scene import Camera, load_scene, scene_from_arrays
+from somtorch.disparity import Camera, load_scene, scene_from_arrays
 
 
 def test_upsampling_to_the_paper_size_scales_disparity_with_the_width():

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from somtorch.disparity.io import write_pfm
-from somtorch.disparity.scene import (
+from somtorch.disparity import (
     Camera,
     ObjectInfo,
     Scene,

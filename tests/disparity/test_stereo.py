@@ -10,7 +10,7 @@ import torch
 from skimage import data
 
 from somtorch.disparity.io import read_disparity, read_image
-from somtorch.disparity.scene import Camera, load_scene
+from somtorch.disparity import Camera, load_scene
 from somtorch.disparity.stereo import SGBMParams, compute_disparity, scene_from_stereo
 
 

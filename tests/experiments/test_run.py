@@ -14,7 +14,7 @@ import pytest
 
 from somtorch import SOM
 from somtorch.disparity.io import write_pfm
-from somtorch.disparity.scene import load_scene
+from somtorch.disparity import load_scene
 from somtorch.geometry import read_ply
 
 ROOT = Path(__file__).resolve().parents[2]

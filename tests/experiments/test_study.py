@@ -253,6 +253,17 @@ def test_aggregate_without_metrics_is_a_clear_error(tmp_path):
         aggregate([tmp_path / "missing"], tmp_path)
 
 
+@pytest.mark.parametrize("argv0, usage", [("/u/.venv/bin/somtorch-aggregate", "usage: somtorch-aggregate "),
+                                           ("/repo/experiments/aggregate.py", "usage: python -m experiments.aggregate ")])
+def test_aggregate_usage_names_the_command_typed(argv0, usage, monkeypatch, capsys):
+    from experiments.aggregate import main
+
+    monkeypatch.setattr(sys, "argv", [argv0])
+    with pytest.raises(SystemExit):
+        main([])
+    assert capsys.readouterr().err.startswith(usage)
+
+
 def test_a_terminated_job_leaves_no_staging_folder_and_reruns(tmp_path):
     cmd = [sys.executable, "-m", "experiments.study", f"paths.output_dir={tmp_path}", "study=term", "data=motorcycle",
            "ensemble=40", "execution=separate", "output.maps=false", "output.tensorboard=false"]
@@ -265,3 +276,21 @@ def test_a_terminated_job_leaves_no_staging_folder_and_reruns(tmp_path):
     assert proc.wait(timeout=60) == 128 + signal.SIGTERM
     assert not list(tmp_path.rglob(".partial-*")), "staging folder left behind"
     assert not list(tmp_path.rglob("metrics.json"))
+
+
+def test_table_plots_stay_readable_for_the_whole_table1_sweep(tmp_path):
+    """8 scenes x {OR, NOR} x {paper, robust} (the paper-preset sweep): one panel per scene, at most
+    ~1800 px wide (a single strip of 36 bar groups was 4752 x 462 px)."""
+    from PIL import Image
+
+    from experiments.aggregate import PAPER_TABLE1, PAPER_TABLE2
+    from experiments.study_sections import tables_plot
+
+    rows = [{"scene": f"scene_{i}", "mode": mode, "config": cfg, "runs": 100, "identified_100": 40,
+             "identified_95": 90, "useful_hits": 70, "x_min": 10.0, "x_mean": 20.0, "x_max": 30.0, "x_opt": 35.0}
+            for i in range(8) for mode in ("OR", "NOR") for cfg in ("paper", "robust")]
+    assert tables_plot(rows, tmp_path, PAPER_TABLE1, PAPER_TABLE2) == ["table1.png", "table2.png"]
+    for name in ("table1.png", "table2.png"):
+        with Image.open(tmp_path / name) as im:
+            w, h = im.size
+        assert w <= 1800 and 600 <= h <= 1400, (name, w, h)

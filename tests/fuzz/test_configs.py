@@ -12,7 +12,7 @@ import torch
 from somtorch.config import PipelineConfig, with_overrides
 from somtorch.constraints import Choice, Flag, Interval, OneOf
 from somtorch.disparity.resize import resize_scene
-from somtorch.disparity.scene import load_scene
+from somtorch.disparity import load_scene
 from somtorch.pipeline import run_pipeline
 
 GROUPS = ("features", "som", "train", "ground", "objects", "reduction")

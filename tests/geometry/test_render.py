@@ -119,3 +119,28 @@ def test_render_errors(tmp_path):
     with pytest.raises(ValueError, match="width must be a positive integer"):
         render_point_cloud(_scene(), tmp_path / "a.png", width=0)
     assert not any(tmp_path.iterdir())
+
+
+def _drawn_share(path) -> float:
+    """Share of the image covered by drawn points (viridis: coloured; panes and labels are grey)."""
+    return float((np.ptp(_pixels(path), axis=2) > 40).mean())
+
+
+def test_stray_points_do_not_squash_the_cloud_into_a_corner(tmp_path):
+    """1.5 % of the points far away to the side and above, at the depth of the rest (mismatches, a
+    far wall through a gap): the view frames the rest."""
+    g = torch.Generator().manual_seed(0)
+    bulk = torch.rand(20_000, 3, generator=g) * torch.tensor([1.0, 0.6, 0.8]) + torch.tensor([0.0, 0.0, 1.0])
+    stray = torch.rand(300, 3, generator=g) * torch.tensor([3.0, 3.0, 0.8]) + torch.tensor([4.0, -6.0, 1.0])
+    path = tmp_path / "stray.png"
+    render_point_cloud(PointCloud(torch.cat([bulk, stray])), path, width=400, height=300, backend="matplotlib",
+                       view="oblique")
+    assert _drawn_share(path) > 0.15  # 0.30 framed; 0.02 when the strays set the axes
+
+
+def test_grey_image_colours_are_replaced_by_depth(tmp_path):
+    """A mono camera's grey levels say nothing a reader can see in a cloud: depth colours it."""
+    cloud = _scene(colors=False)
+    grey = PointCloud(cloud.points, torch.full((len(cloud), 3), 0.5))
+    render_point_cloud(grey, tmp_path / "grey.png", width=200, height=150, backend="matplotlib")
+    assert (np.ptp(_pixels(tmp_path / "grey.png"), axis=2) > 30).mean() > 0.01

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from experiments.datasets import frames, load_frame
-from somtorch.disparity.scene import load_scene
+from somtorch.disparity import load_scene
 from somtorch.pipeline import PipelineConfig, run_pipeline
 
 CONF = Path(__file__).resolve().parents[2] / "conf"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from somtorch.disparity.scene import load_scene
+from somtorch.disparity import load_scene
 from somtorch.tasks.reduction import reduce_map
 from somtorch.tasks.scoring import object_box, optimal_reduction, score_reduction
 

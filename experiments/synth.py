@@ -1,0 +1,123 @@
+"""``python -m experiments.synth`` / ``somtorch-synth``: generated stereo frames into the cache.
+
+Writes ``n`` frames (seeds ``start .. start + n - 1``) per family x camera into
+``<cache>/<family>_<camera>/<seed:05d>/`` (the Middlebury layout ``load_scene`` reads; see
+``docs/synth.md``), skipping frames that are present and made by this generator version (the
+``manifest.json`` of each data set lists the frames and the generator's hash). One frame per task on
+``workers`` processes, each on one thread.
+
+    python -m experiments.synth 'families=[stairs,garden]' 'cameras=[oakd]' n=50
+    python -m experiments.synth 'cameras=[oakd,kitti,middlebury]' n=40 workers=2
+    python -m experiments.synth n=4 scale=0.5 cache=/tmp/synth      # small previews elsewhere
+"""
+
+from __future__ import annotations
+
+if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
+    from .help import maybe_print_help
+
+    maybe_print_help("synth")
+
+import logging
+import time
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig, OmegaConf
+
+from . import CONF
+from .schema import register
+from .synth_config import SynthConfig
+
+CONF_DIR = str(CONF)
+log = logging.getLogger("somtorch.synth")
+register()
+
+
+def _init_worker() -> None:
+    import cv2
+    import torch
+
+    torch.set_num_threads(1)
+    cv2.setNumThreads(1)
+
+
+def _make(family: str, camera: str, seed: int, scale: float, root: str) -> dict:
+    """Generate and write one frame; its manifest entry (with the seconds it took)."""
+    from somtorch.synth.frame import generate_frame
+    from somtorch.synth.store import frame_dir, manifest_entry, write_frame
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    frame = generate_frame(family, seed, camera, scale=scale)
+    write_frame(frame, frame_dir(family, camera, seed, scale, root))
+    return {**manifest_entry(frame), "wall_s": round(time.perf_counter() - t0, 3),
+            "cpu_s": round(time.process_time() - c0, 3)}
+
+
+def generate(cfg: SynthConfig, progress: bool = True) -> dict:
+    """Generate the missing or stale frames of ``cfg``; a summary (counts, seconds, per-camera rates)."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from multiprocessing import get_context
+
+    from tqdm.auto import tqdm
+
+    from somtorch.synth import CAMERAS, FAMILIES
+    from somtorch.synth.store import cache_root, dataset_dir, is_current, read_manifest, write_manifest
+    from somtorch.validation import check_choice
+
+    for f in cfg.families:
+        check_choice("families", f, FAMILIES)
+    for c in cfg.cameras:
+        check_choice("cameras", c, CAMERAS)
+    if cfg.n < 0 or cfg.start < 0 or cfg.workers < 1 or not 0 < cfg.scale <= 1:
+        raise ValueError(f"need n >= 0, start >= 0, workers >= 1 and 0 < scale <= 1; got n={cfg.n}, "
+                         f"start={cfg.start}, workers={cfg.workers}, scale={cfg.scale}")
+    root = str(Path(cfg.cache).expanduser() if cfg.cache else cache_root())
+    manifests, todo = {}, []
+    for fam in cfg.families:
+        for cam in cfg.cameras:
+            ds = dataset_dir(fam, cam, cfg.scale, root)
+            manifests[(fam, cam)] = read_manifest(ds)["frames"]
+            todo += [(fam, cam, s) for s in range(cfg.start, cfg.start + cfg.n)
+                     if not is_current(ds, s, {"frames": manifests[(fam, cam)]})]
+    total = len(cfg.families) * len(cfg.cameras) * cfg.n
+    log.info("%d of %d frames to generate into %s (%d present)", len(todo), total, root, total - len(todo))
+    t0, seconds = time.perf_counter(), {}
+    if todo:
+        with ProcessPoolExecutor(cfg.workers, mp_context=get_context("spawn"), initializer=_init_worker) as ex:
+            jobs = {ex.submit(_make, fam, cam, s, cfg.scale, root): (fam, cam, s) for fam, cam, s in todo}
+            for fut in tqdm(as_completed(jobs), total=len(jobs), unit="frame", disable=not progress):
+                fam, cam, s = jobs[fut]
+                entry = fut.result()
+                seconds.setdefault(cam, []).append((entry.pop("wall_s"), entry.pop("cpu_s")))
+                manifests[(fam, cam)][f"{s:05d}"] = entry
+                write_manifest(dataset_dir(fam, cam, cfg.scale, root), manifests[(fam, cam)])
+    wall = time.perf_counter() - t0
+    summary = {"root": root, "generated": len(todo), "present": total - len(todo), "wall_s": round(wall, 1),
+               "frames_per_min": round(60 * len(todo) / wall, 1) if todo else None,
+               # per camera: mean seconds of one frame in a worker, wall clock and CPU (one thread)
+               "wall_s_per_frame": {c: round(sum(w for w, _ in v) / len(v), 3) for c, v in seconds.items()},
+               "cpu_s_per_frame": {c: round(sum(u for _, u in v) / len(v), 3) for c, v in seconds.items()}}
+    log.info("%s", summary)
+    return summary
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="synth")
+def main(dcfg: DictConfig) -> dict:
+    from .cli import show_progress
+    from .schema import one_line_errors
+
+    with one_line_errors(log):
+        cfg: SynthConfig = OmegaConf.to_object(dcfg)
+        return generate(cfg, progress=show_progress())
+
+
+def cli() -> None:
+    """Console entry: the overrides are checked against the schema first ("did you mean")."""
+    from .cli import run_checked
+
+    run_checked(main, SynthConfig)
+
+
+if __name__ == "__main__":
+    cli()
