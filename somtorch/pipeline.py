@@ -24,7 +24,6 @@ from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, Pi
                      SOMConfig, TrainConfig)
 from .core import SOM
 from .disparity.features import Features, make_features, relative_disparity
-from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
 from .tasks.detect import MapContext, find_objects
@@ -137,8 +136,7 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     """
     timer = timer or _Timer()
     check_usable(scene, cfg)
-    with timer("clean"):
-        valid = remove_speckles(scene.disparity, scene.valid, max_size_frac=cfg.features.speckle_frac)
+    valid = scene.valid
     with timer("ground"):
         ground = ground_fn(valid) if ground_fn is not None else fit_ground_plane(scene.disparity, valid, cfg.ground)
     with timer("features"):

@@ -47,9 +47,6 @@ class GroundConfig(Validated):
             valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
             (disparity below the band); a ramp, a lattice or a plane through the objects fails
             (1 = no check).
-        slope_rows: a ground pixel must also rise down the image like the plane, measured over
-            ``slope_rows ×`` the image height above and below it, so the vertical surfaces that
-            cross the plane's band (an object's base, legs) stay out of the mask (0 = off).
         foot_frac: pixels within this share of the shorter image side of a protrusion (a pixel
             above the plane's band, in a solid 3 × 3 block) leave the mask: the
             feet of the objects standing on the plane cross its band (every rule; applied after the
@@ -66,7 +63,7 @@ class GroundConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "enabled": BOOL, "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_top_frac": FRACTION, "max_below_frac": FRACTION,
-        "slope_rows": Interval(0, 0.25), "foot_frac": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
+        "foot_frac": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
         "constrained": BOOL, "tries": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
         "max_protrusion_frac": FRACTION,
     }
@@ -79,7 +76,6 @@ class GroundConfig(Validated):
     min_slope_frac: float = 1.0
     max_top_frac: float = 0.15
     max_below_frac: float = 0.1
-    slope_rows: float = 0.0
     foot_frac: float = 0.0
     iterations: int = 400
     sample: int = 5000
