@@ -39,7 +39,7 @@ except ImportError:  # python benchmarks/bench_pipeline.py
 from somtorch.disparity.scene import Scene, scene_from_arrays
 from somtorch.pipeline import PipelineConfig, SOMConfig, run_pipeline, train_stride
 
-STAGE_ORDER = ("clean", "ground", "features", "train", "segment", "objects", "reduction")
+STAGE_ORDER = ("ground", "features", "train", "segment", "objects", "reduction")
 CORE_STAGES = ("train", "segment", "objects", "reduction")
 TARGET_S = 0.100
 LINEAR_EXPONENT_MAX = 1.10  # "at most linear", with room for timing noise

@@ -12,7 +12,7 @@ from typing import Any
 
 from .metrics_schema import config_hash
 
-STAGES = ("clean", "ground", "features", "train", "segment", "objects", "reduction")
+STAGES = ("ground", "features", "train", "segment", "objects", "reduction")
 
 
 def _fmt(v: Any, nd: int = 1) -> str:

@@ -67,7 +67,7 @@ def train_segment_large(disparity: np.ndarray, workdir: str | Path, *, som: SOMC
             (``labels.npy``) are written.
         som, train, features: the configs (defaults: the library's); ``train`` runs the batch
             map whatever its ``mode``; ``features`` as :func:`~somtorch.disparity.features.make_features`
-            reads it (``color_weight`` and ``speckle_frac`` must be 0).
+            reads it (``color_weight`` must be 0).
         memory_budget: bytes the working set may use (the block size follows it).
     """
     som_cfg, tc, fc = som or SOMConfig(), train or TrainConfig(), features or FeatureConfig()
@@ -78,9 +78,6 @@ def train_segment_large(disparity: np.ndarray, workdir: str | Path, *, som: SOMC
     if fc.color_weight > 0:
         raise ValueError(f"features.color_weight={fc.color_weight}: the large-map path reads a disparity map "
                          "only, without the left image; set color_weight=0")
-    if fc.speckle_frac > 0:
-        raise ValueError(f"features.speckle_frac={fc.speckle_frac}: speckle removal needs the whole map in "
-                         "memory; set speckle_frac=0 (or remove speckles when writing the map)")
     work = Path(workdir)
     work.mkdir(parents=True, exist_ok=True)
     h, w = disparity.shape

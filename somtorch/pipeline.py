@@ -26,7 +26,6 @@ from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, Pi
                      SOMConfig, TrainConfig)
 from .core import SOM
 from .disparity.features import Features, make_features, relative_disparity
-from .disparity.filters import remove_speckles
 from .disparity.scene import Scene
 from .resources import Estimate, estimate
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
@@ -142,8 +141,7 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     """
     timer = timer or _Timer()
     check_usable(scene, cfg)
-    with timer("clean"):
-        valid = remove_speckles(scene.disparity, scene.valid, max_size_frac=cfg.features.speckle_frac)
+    valid = scene.valid
     with timer("ground"):
         ground = ground_fn(valid) if ground_fn is not None else fit_ground_plane(scene.disparity, valid, cfg.ground)
     with timer("features"):
@@ -197,9 +195,9 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
     h, w = scene.disparity.shape
     with timer("objects"):  # every member segments the same pixels: one context for all
         grow = cfg.features.stride_at(cfg.objects.grow_stride, h, w)
-        disp, valid, labels, image, g, ocfg = _strided(scene, seg.labels, ground,
-                                                       replace(cfg.objects, map_stride=st, grow_stride=grow))
-        ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg, image)
+        disp, valid, labels, g, ocfg = _strided(scene, seg.labels, ground,
+                                                replace(cfg.objects, map_stride=st, grow_stride=grow))
+        ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg)
         integral = ctx.integral if st == 1 else valid_integral(scene.valid)  # the reduction's: full size
     obj_mask, x_opt = None, None
     if scene.objects is not None:
@@ -210,8 +208,7 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
     for e in range(seg.labels.shape[0]):
         interrupt.checkpoint(f"in the object step, member {e + 1}/{seg.labels.shape[0]}")
         with timer("objects"):
-            found = find_objects(labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, ocfg,
-                                 None if seg.ref_color is None else seg.ref_color[e])
+            found = find_objects(labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, ocfg)
             if st > 1:
                 found.areas = [_full_size(a, st, h, w) for a in found.areas]
                 found.kept = [_full_size(a, st, h, w) for a in found.kept]
@@ -301,13 +298,12 @@ def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg
     """
     s = cfg.map_stride
     if s == 1:
-        return scene.disparity, scene.valid, labels, scene.image, ground, cfg
+        return scene.disparity, scene.valid, labels, ground, cfg
     g = None if ground is None else GroundPlane(ground.a * s, ground.b * s, ground.c, ground.tol,
                                                 ground.mask[::s, ::s].contiguous(), ground.inlier_frac,
                                                 ground.support)
-    image = None if scene.image is None else scene.image[:, ::s, ::s].contiguous()
     return (scene.disparity[::s, ::s].contiguous(), scene.valid[::s, ::s].contiguous(),
-            labels[:, ::s, ::s].contiguous(), image, g, replace(cfg, grow_stride=max(1, cfg.grow_stride // s)))
+            labels[:, ::s, ::s].contiguous(), g, replace(cfg, grow_stride=max(1, cfg.grow_stride // s)))
 
 
 def _full_size(area: ObjectArea, s: int, h: int, w: int) -> ObjectArea:

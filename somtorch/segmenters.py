@@ -42,8 +42,6 @@ class Segmentation:
         prototypes: feature-space centres ``(E, K, D)`` (SOM weights, k-means centres) or None.
         som: the trained maps (``"som"`` / ``"minisom"``) or None.
         seeds: the seed of each member.
-        ref_color: reference colour (Y, Cb, Cr in [0, 1]) of each segment ``(E, K, 3)`` when the
-            features carry colour, else None.
     """
 
     labels: torch.Tensor
@@ -52,7 +50,6 @@ class Segmentation:
     prototypes: torch.Tensor | None
     som: SOM | None
     seeds: list[int]
-    ref_color: torch.Tensor | None = None
 
     @property
     def num_segments(self) -> int:
@@ -85,8 +82,7 @@ def _from_prototypes(weight: torch.Tensor, feats: Features, grid_d2: torch.Tenso
                      seeds: list[int]) -> Segmentation:
     """A segmentation whose pixels are labelled later (by :func:`run_segmenter`, timed apart)."""
     units = feats.to_pixel_units(weight)  # (E, K, D): y px, x px, d px[, Y, Cb, Cr]
-    ref_c = units[..., 3:6] if units.shape[-1] >= 6 else None
-    return Segmentation(None, units[..., 2], grid_d2, weight, som, seeds, ref_c)  # type: ignore[arg-type]
+    return Segmentation(None, units[..., 2], grid_d2, weight, som, seeds)  # type: ignore[arg-type]
 
 
 def _new_som(cfg: PipelineConfig, runs: int, dim: int, device: str = "cpu") -> SOM:
@@ -227,7 +223,6 @@ def run_segmenter(feats: Features, train: Features, scene: Any, usable: torch.Te
             out.labels, out.ref_disparity = out.labels.cpu(), out.ref_disparity.cpu()
             out.prototypes = out.prototypes.cpu() if out.prototypes is not None else None
             out.grid_d2 = out.grid_d2.cpu() if out.grid_d2 is not None else None
-            out.ref_color = out.ref_color.cpu() if out.ref_color is not None else None
             if out.som is not None:
                 out.som.to("cpu")
     return out

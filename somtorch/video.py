@@ -136,7 +136,7 @@ class SequenceRunner:
             self.som = seg.som
         members = detect(scene, seg, ground, cfg, timer)
         t = dict(timer.t)
-        t["ground"] = t.pop("clean", 0.0) + t.get("ground", 0.0)  # cleaning is part of the ground stage here
+        t["ground"] = t.get("ground", 0.0)
         t["objects"] = t.get("objects", 0.0) + t.pop("reduction", 0.0)
         out = FrameResult(self._index, members, warm, reused[0], ground, t)
         self._index += 1

@@ -91,8 +91,8 @@ def test_the_constraints_table_names_the_field_and_the_expectation(cls, kwargs, 
 def test_wrong_types_are_type_errors_and_overrides_are_validated():
     with pytest.raises(TypeError, match="train.epochs"):
         TrainConfig(epochs=2.5)
-    with pytest.raises(TypeError, match="objects.grow"):
-        AreaConfig(grow="yes")
+    with pytest.raises(TypeError, match="objects.drop_specks"):
+        AreaConfig(drop_specks="yes")
     cfg = with_overrides(PipelineConfig(), {"objects.merge": 0.5, "ensemble": 3})
     assert (cfg.objects.merge, cfg.ensemble, PipelineConfig().objects.merge) == (0.5, 3, AreaConfig().merge)
     with pytest.raises(ValueError, match="not a field"):

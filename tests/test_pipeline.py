@@ -317,22 +317,6 @@ def test_strides_scale_with_the_resolution_so_a_resampled_map_trains_on_as_many_
     assert cfg.features.stride_at(1, 5 * 480, 5 * 640) == 1  # NOR (every pixel) stays every pixel
 
 
-def test_the_tree_preset_runs_the_pipeline_and_keeps_the_motorcycle(motorcycle):
-    """``objects=tree`` (the merge tree as candidates) composes, runs end to end and, on the
-    embedded scene, keeps a box around most of the motorcycle's pixels."""
-    from experiments.distributed import compose_config
-
-    cfg = compose_config(["objects=tree", "train.parallel=none"])[0]
-    assert cfg.objects.hierarchy and cfg.objects.merge == 0.0
-    flat = compose_config(["train.parallel=none"])[0]
-    tree_run = run_pipeline(motorcycle, cfg, metrics=False)
-    flat_run = run_pipeline(motorcycle, flat, metrics=False)
-    assert len(tree_run.members[0].areas) > len(flat_run.members[0].areas)  # the tree's nodes
-    assert tree_run.members[0].reduction.reduction_union > 10.0
-    x0, y0, x1, y1 = tree_run.members[0].kept[0].box
-    assert x1 - x0 > motorcycle.width // 3 and y1 - y0 > motorcycle.height // 3
-
-
 def test_many_calls_warn_once_about_kept_everything(caplog):
     """The paper preset keeps the whole map in many runs: inside fallback_summary (a study job's
     separate runs) one line for all of them instead of one per run."""

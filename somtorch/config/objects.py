@@ -47,9 +47,6 @@ class GroundConfig(Validated):
             valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
             (disparity below the band); a ramp, a lattice or a plane through the objects fails
             (1 = no check).
-        slope_rows: a ground pixel must also rise down the image like the plane, measured over
-            ``slope_rows ×`` the image height above and below it, so the vertical surfaces that
-            cross the plane's band (an object's base, legs) stay out of the mask (0 = off).
         foot_frac: pixels within this share of the shorter image side of a protrusion (a pixel
             above the plane's band, in a solid 3 × 3 block) leave the mask: the
             feet of the objects standing on the plane cross its band (every rule; applied after the
@@ -66,7 +63,7 @@ class GroundConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "enabled": BOOL, "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_top_frac": FRACTION, "max_below_frac": FRACTION,
-        "slope_rows": Interval(0, 0.25), "foot_frac": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
+        "foot_frac": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
         "constrained": BOOL, "tries": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
         "max_protrusion_frac": FRACTION,
     }
@@ -79,7 +76,6 @@ class GroundConfig(Validated):
     min_slope_frac: float = 1.0
     max_top_frac: float = 0.15
     max_below_frac: float = 0.1
-    slope_rows: float = 0.0
     foot_frac: float = 0.0
     iterations: int = 400
     sample: int = 5000
@@ -108,24 +104,11 @@ class AreaConfig(Validated):
         spread: ``"range"`` (d_max − d_min, the paper's) or ``"robust"`` (5th–95th percentile).
         min_boundary: two segments touch if their common boundary is at least this share of the
             shorter of their two perimeters.
-        hierarchy: the candidates are also the nodes of the areas' merge tree (touching areas
-            joined across the smallest disparity step first,
-            :func:`~somtorch.tasks.objects.merge_tree`), meant with ``merge`` 0.
 
     Selection — which areas are kept:
         select: ``"nearest"`` (largest mean disparity, the paper's), ``"salient"`` (ranked by
             contrast to the surrounding segments × ``area_frac ** size_power``) or ``"all"``.
         size_power: weight of the area's size in the salient ranking (0 = contrast alone).
-        color_rank: with colour features, an area's salience is its contrast plus
-            ``color_rank ×`` the disparity spread × its colour distance to its surroundings
-            (Y, Cb, Cr in [0, 1]; 0 = disparity contrast only).
-        edge_rank: salience × (share of the area's border on image edges / the map's share) **
-            edge_rank, at most 1: a depth boundary no image edge follows is a matching artefact
-            (:func:`~somtorch.tasks.detect.image_edges`). 0 = off; no effect without an image.
-        facing_rank: salience × cos θ ** facing_rank, θ the tilt of the area's disparity plane
-            from the line of sight: a side wall or floor receding to its vanishing point is not an
-            obstacle's face (:func:`~somtorch.tasks.objects._facing`). 0 = off.
-        min_contrast: salient: minimum contrast as a share of the disparity spread.
         max_area_frac, min_area_frac: size limits as shares of the segmented pixels.
         max_areas: how many areas are kept at most.
         keep_ratio: with ``max_areas > 1``, a further area is kept only if its rank score is at
@@ -147,9 +130,7 @@ class AreaConfig(Validated):
             image side, else the next candidate is tried (0 = off).
         solidity_size: side of that square as a share of the shorter image side.
         purity_candidates: how many ranked candidates the purity and solidity tests may try.
-        grow: replace each kept area by the image-connected region nearer than half-way between
-            it and its surroundings.
-        grow_stride: the growing, the box refinement and the solidity work on every n-th pixel.
+        grow_stride: the box refinement and the solidity work on every n-th pixel.
         map_stride: the whole object step reads every n-th pixel of the label map in y and x
             (1 = all; 2 = a quarter of them, about 3× faster): boxes are mapped back to full size
             and the reduction is computed on the full map.
@@ -167,14 +148,13 @@ class AreaConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice(options.LINKS),
         "spread": Choice(options.SPREADS), "min_boundary": NON_NEGATIVE,
-        "size_power": NON_NEGATIVE, "color_rank": NON_NEGATIVE, "edge_rank": NON_NEGATIVE,
-        "facing_rank": NON_NEGATIVE, "hierarchy": BOOL, "grow": BOOL, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
+        "size_power": NON_NEGATIVE, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
         "select": Choice(options.SELECTIONS), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
         "keep_budget": Interval(0, 1, open_lo=True),
-        "fail_safe": BOOL, "min_contrast": NON_NEGATIVE, "max_area_frac": Interval(0, 1, open_lo=True),
+        "fail_safe": BOOL, "max_area_frac": Interval(0, 1, open_lo=True),
         "min_area_frac": FRACTION,
     }
     _relations: ClassVar[list[tuple[Any, str]]] = [
@@ -187,12 +167,7 @@ class AreaConfig(Validated):
     link: str = "image"
     spread: str = "robust"
     min_boundary: float = 0.1
-    hierarchy: bool = False
     size_power: float = 0.25
-    color_rank: float = 0.0
-    edge_rank: float = 0.0
-    facing_rank: float = 0.0
-    grow: bool = False
     grow_stride: int = 2
     map_stride: int = 2
     box_coverage: float = 0.99
@@ -209,6 +184,5 @@ class AreaConfig(Validated):
     keep_ratio: float = 0.2
     keep_budget: float = 0.3
     fail_safe: bool = True
-    min_contrast: float = 0.0
     max_area_frac: float = 0.7
     min_area_frac: float = 0.01

@@ -27,8 +27,6 @@ class FeatureConfig(Validated):
             the paper's runtime-optimised mode); the whole map is always segmented.
         color_weight: append the left image's Y, Cb, Cr (each in [0, 1]) times this weight to
             every pixel vector (0 = off; needs the scene's image).
-        speckle_frac: remove image-connected speckles of similar disparity smaller than this share
-            of the pixels before anything else (OpenCV ``filterSpeckles``; 0 = off).
         reference_pixels: the pipeline's strides (``train_stride``, ``objects.map_stride``,
             ``objects.grow_stride``) are counted on an image of this many pixels (640 × 480), see
             :meth:`stride_at`; 0 = strides in pixels as given (the paper's reading).
@@ -39,7 +37,7 @@ class FeatureConfig(Validated):
         "normalize": Choice(options.NORMALIZATIONS),
         "d_weight": POSITIVE, "d_mode": Choice(options.D_MODES),
         "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
-        "speckle_frac": Interval(0, 1), "reference_pixels": Interval(0, None, integer=True),
+        "reference_pixels": Interval(0, None, integer=True),
     }
 
     normalize: str = "image"
@@ -47,7 +45,6 @@ class FeatureConfig(Validated):
     d_mode: str = "raw"
     color_weight: float = 0.0
     train_stride: int = 10
-    speckle_frac: float = 0.0
     reference_pixels: int = 307_200
 
     def stride_at(self, stride: int, height: int, width: int) -> int:

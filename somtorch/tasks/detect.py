@@ -24,9 +24,9 @@ from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
                       select_areas)
 from .reduction import reduce_map, valid_integral
-from .refine import _opened_share, _square, box_purity, grow_area, map_solidity, merge_adjacent, refine_box
+from .refine import _opened_share, _square, box_purity, map_solidity, merge_adjacent, refine_box
 
-__all__ = ["MapContext", "ObjectResult", "find_objects", "image_edges", "kept_areas", "rank_score"]
+__all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "rank_score"]
 
 
 @dataclass
@@ -42,8 +42,6 @@ class MapContext:
         solidity: :func:`~somtorch.tasks.refine.map_solidity` of the segmented pixels.
         ground_residual: |disparity − ground plane| ``(H, W)`` or None (no plane, or clutter off).
         clutter_band: ``ground_clutter ×`` the plane's inlier band, px (0 without a plane).
-        edges: pixels near an edge of the left image ``(H, W)`` bool (:func:`image_edges`), or None
-            (no image, or ``edge_rank`` off).
     """
 
     disparity: torch.Tensor
@@ -54,46 +52,19 @@ class MapContext:
     solidity: float
     ground_residual: torch.Tensor | None
     clutter_band: float
-    edges: torch.Tensor | None = None
 
     @classmethod
     def build(cls, disparity: torch.Tensor, valid: torch.Tensor, segmented: torch.Tensor,
-              ground: GroundPlane | None, cfg: AreaConfig, image: torch.Tensor | None = None) -> MapContext:
-        """The context of a map whose ``segmented`` ``(H, W)`` pixels carry a label (``labels >= 0``);
-        ``image``: the left image ``(3, H, W)`` uint8, used by ``cfg.edge_rank``."""
+              ground: GroundPlane | None, cfg: AreaConfig) -> MapContext:
+        """The context of a map whose ``segmented`` ``(H, W)`` pixels carry a label (``labels >= 0``)."""
         h, w = disparity.shape
         residual, band = None, 0.0
-        if ground is not None and cfg.ground_clutter > 0 and not cfg.grow:
+        if ground is not None and cfg.ground_clutter > 0:
             residual = (disparity - ground.disparity(h, w)).abs()
             band = cfg.ground_clutter * ground.tol
         lab = torch.where(segmented, 0, -1)
-        edges = image_edges(image) if image is not None and cfg.edge_rank > 0 \
-            and tuple(image.shape[-2:]) == (h, w) else None
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
-                   map_solidity(lab, cfg), residual, band, edges)
-
-
-def image_edges(image: torch.Tensor, reach_frac: float = 0.005) -> torch.Tensor:
-    """Pixels within ``reach_frac ×`` the image diagonal (at least 1 px) of a Canny edge of the image.
-
-    Canny's thresholds are 0.66 and 1.33 × the median grey level (the usual automatic choice), so
-    the edge density adapts to the image's exposure; the reach absorbs the few pixels by which a
-    computed disparity boundary misses the outline (foreground fattening).
-
-    Shape:
-        ``image`` ``(3, H, W)`` or ``(1, H, W)`` uint8 → ``(H, W)`` bool.
-    """
-    import cv2
-    import numpy as np
-
-    a = image.detach().cpu().numpy()
-    gray = cv2.cvtColor(np.ascontiguousarray(a.transpose(1, 2, 0)), cv2.COLOR_RGB2GRAY) if a.shape[0] == 3 else a[0]
-    med = float(np.median(gray))
-    edges = cv2.Canny(np.ascontiguousarray(gray), int(max(0.0, 0.66 * med)), int(min(255.0, 1.33 * med)))
-    h, w = gray.shape
-    r = max(1, round(reach_frac * (h * h + w * w) ** 0.5))
-    near = cv2.dilate(edges, np.ones((2 * r + 1, 2 * r + 1), np.uint8)) > 0
-    return torch.from_numpy(near)
+                   map_solidity(lab, cfg), residual, band)
 
 
 @dataclass
@@ -107,24 +78,21 @@ class ObjectResult:
 
 
 def rank_score(area: ObjectArea, cfg: AreaConfig) -> float:
-    """The salient ranking's score: ``salience × area_frac ** size_power`` (salience = contrast
-    plus the optional colour term)."""
-    return area.ranking * area.area_frac ** cfg.size_power
+    """The salient ranking's score: ``contrast × area_frac ** size_power``."""
+    return area.contrast * area.area_frac ** cfg.size_power
 
 
 def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
-                 ctx: MapContext, cfg: AreaConfig | None = None,
-                 ref_color: torch.Tensor | None = None) -> ObjectResult:
+                 ctx: MapContext, cfg: AreaConfig | None = None) -> ObjectResult:
     """Step 1c on one member (see the module docstring).
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 not segmented); ``ref_disparity`` ``(K,)`` px;
-        ``grid_d2`` ``(K, K)`` or None; ``ref_color`` ``(K, 3)`` Y, Cb, Cr or None.
+        ``grid_d2`` ``(K, K)`` or None.
     """
     cfg = cfg or AreaConfig()
-    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread,
-                         edges=ctx.edges, moments=cfg.facing_rank > 0)
-    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, ref_color)
+    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread)
+    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:
         return ObjectResult(stats, areas, kept)
@@ -138,11 +106,10 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
 
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
                ctx: MapContext) -> list[ObjectArea]:
-    """Select, join, refine (or grow) and check the candidates in rank order.
+    """Select, join, refine and check the candidates in rank order.
 
     Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with
-    segments of an area kept before it), its box refined (:func:`refine_box`) or grown
-    (:func:`grow_area`), and kept if its :func:`box_purity` reaches ``cfg.min_purity`` and its
+    segments of an area kept before it), its box refined (:func:`refine_box`), and kept if its :func:`box_purity` reaches ``cfg.min_purity`` and its
     segments' solidity reaches ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a
     dense map's standard). After the first kept area, a further one must score at least
     ``cfg.keep_ratio ×`` the best candidate's rank score and, with ``cfg.keep_budget < 1``, leave
@@ -176,12 +143,9 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             break
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
                                 max_area_frac=cfg.max_area_frac, exclude=taken)[0]
-        if cfg.grow:
-            done = grow_area(joined, labels, ctx.disparity, ctx.usable, stride=cfg.grow_stride)
-        else:
-            done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
-                              stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
-                              clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)
+        done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
+                          stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
+                          clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)
         own = label_mask(lab_s, done.neurons)
         solid = _opened_share(own, square)  # in [0, 1]: the opening keeps a subset of the pixels
         done = replace(done, purity=box_purity(done, labels, ctx.integral), solidity=solid,

@@ -204,8 +204,6 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     plane = a * xs + b * ys + c
     d = disparity.double()
     mask = ok & ((plane - d).abs() < tol)
-    if cfg.slope_rows > 0:
-        mask &= _follows_slope(disparity, ok, b, tol, max(1, round(cfg.slope_rows * h)))
     frac = int(mask.sum()) / n_valid
     if frac < cfg.min_inlier_frac:
         return None
@@ -255,26 +253,6 @@ def largest_protrusion(above: torch.Tensor) -> int:
         return 0
     n, _, stats, _ = cv2.connectedComponentsWithStats(above.numpy().astype(np.uint8), connectivity=8)
     return int(stats[1:, cv2.CC_STAT_AREA].max())
-
-
-def _follows_slope(disparity: torch.Tensor, ok: torch.Tensor, b: float, tol: float, k: int) -> torch.Tensor:
-    """Pixels whose disparity rises down the image like the plane's (``b`` px per row), measured
-    over ``k`` rows above and below: ``|d(y+k) − d(y−k) − 2kb| < 2·tol``. A vertical surface (an object,
-    a chair leg) crossing the plane's band has ``∂d/∂y ≈ 0`` and fails; pixels without both
-    neighbours pass (the band alone decides there).
-
-    Shape:
-        ``disparity``, ``ok`` ``(H, W)`` → ``(H, W)`` bool.
-    """
-    h = disparity.shape[0]
-    out = torch.ones_like(ok)
-    if h <= 2 * k:
-        return out
-    d = disparity.double()
-    diff = d[2 * k:] - d[:-2 * k]  # (H − 2k, W): row y + k minus row y − k, centred on y
-    both = ok[2 * k:] & ok[:-2 * k]
-    out[k:h - k] = ~both | ((diff - 2 * k * b).abs() < 2 * tol)
-    return out
 
 
 def _plane_fit(pts: torch.Tensor) -> torch.Tensor:

@@ -5,7 +5,7 @@ After :func:`~somtorch.tasks.objects.select_areas` ranks the candidate areas, ea
 1. joined with the image-adjacent segments of similar disparity (:func:`merge_adjacent`: an object
    split over several areas at different depths is kept whole),
 2. given a refined box (:func:`refine_box`: ground-plane clutter, stray fragments and thin
-   protrusions left out) or, with ``grow``, replaced by the near region around it (:func:`grow_area`),
+   protrusions left out),
 3. kept only if its box is mostly its own pixels (:func:`box_purity`, ``min_purity``), else the next
    candidate is tried.
 
@@ -81,39 +81,6 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
     for i, a in enumerate(out):
         a.rank = i
     return out
-
-
-def grow_area(area: ObjectArea, labels: torch.Tensor, disparity: torch.Tensor, usable: torch.Tensor,
-              *, stride: int = _D.grow_stride) -> ObjectArea:
-    """The image-connected region of pixels nearer than ``mean_disparity − contrast/2`` that touches
-    the area's pixels (see ``AreaConfig.grow``). Returns a new :class:`ObjectArea` with the grown box
-    and pixel count (neurons, disparity and contrast unchanged).
-
-    Shape:
-        ``labels``, ``disparity``, ``usable``: ``(H, W)``; ``usable`` marks the pixels that may join
-        (valid, not ground).
-    """
-    import cv2
-    import numpy as np
-
-    if area.contrast <= 0:
-        return area
-    thr = area.mean_disparity - 0.5 * area.contrast
-    s = max(1, int(stride))
-    lab = labels[::s, ::s].cpu().numpy()
-    near = (usable[::s, ::s] & (disparity[::s, ::s] >= thr)).cpu().numpy()
-    seed = np.isin(lab, np.asarray(area.neurons)) & near
-    if not seed.any():
-        return area
-    _, comp = cv2.connectedComponents(near.astype(np.uint8), connectivity=8)
-    hit = np.unique(comp[seed])
-    hit = hit[hit > 0]
-    region = np.isin(comp, hit)
-    ys, xs = np.nonzero(region)
-    h, w = labels.shape
-    box = (int(xs.min()) * s, int(ys.min()) * s, min(w - 1, int(xs.max()) * s + s - 1),
-           min(h - 1, int(ys.max()) * s + s - 1))
-    return replace(area, pixels=int(region.sum()) * s * s, box=box, segment_box=area.box, grow_threshold=thr)
 
 
 def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.box_coverage,

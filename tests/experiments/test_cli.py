@@ -37,7 +37,7 @@ def test_typos_are_named_with_the_nearest_key(args, expect):
 
 @pytest.mark.parametrize("args", [
     ["ensemble=3", "objects.similarity=0.1", "objects=paper", "data=kitti2015", "+preset=paper",
-     "hydra.run.dir=/tmp/x", "~objects.grow", "++foo=1", "data.sgbm.numDisparities=64", "-m",
+     "hydra.run.dir=/tmp/x", "~objects.drop_specks", "++foo=1", "data.sgbm.numDisparities=64", "-m",
      "objects.similarity=0.01,0.05", "hydra/launcher=joblib", "train=online,batch"],
 ])
 def test_valid_overrides_pass(args):

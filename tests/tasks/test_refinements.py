@@ -1,4 +1,4 @@
-"""Refinements of the object areas and the input: box refinement, segment merging, area growing, speckles."""
+"""Refinements of the object areas and the input: box refinement, segment merging, speckles."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import torch
 from somtorch.disparity.filters import remove_speckles
 from somtorch.tasks.objects import AreaConfig, ObjectArea, find_object_areas, neuron_stats, select_areas
 from somtorch.tasks.detect import MapContext, find_objects, kept_areas
-from somtorch.tasks.refine import box_purity, grow_area, merge_adjacent, refine_box, solidity
+from somtorch.tasks.refine import box_purity, merge_adjacent, refine_box, solidity
 from somtorch.tasks.reduction import valid_integral
 
 
@@ -100,28 +100,6 @@ def test_merge_adjacent_drops_a_kept_area_absorbed_by_a_better_one():
     merged = merge_adjacent([first, second], stats, ratio=0.75)
     assert [a.neurons for a in merged] == [[0, 1]]
     assert merged[0].rank == 0
-
-
-def test_grow_area_recovers_the_whole_near_object_and_stops_at_the_background():
-    disp = torch.full((60, 80), 10.0)
-    disp[10:40, 20:50] = 50.0  # near object
-    labels = torch.full((60, 80), 1, dtype=torch.long)
-    labels[10:25, 20:35] = 0  # the SOM area holds only the object's top-left quarter
-    usable = torch.ones(60, 80, dtype=torch.bool)
-    grown = grow_area(_area([0], (20, 10, 34, 24)), labels, disp, usable, stride=1)
-    assert grown.box == (20, 10, 49, 39)
-    assert grown.pixels == 30 * 30
-    assert grown.grow_threshold == 30.0  # mean − contrast / 2
-    # pixels that may not join (e.g. the ground plane) stop the growth
-    usable[:, 35:] = False
-    assert grow_area(_area([0], (20, 10, 34, 24)), labels, disp, usable, stride=1).box == (20, 10, 34, 39)
-
-
-def test_grow_area_leaves_a_non_salient_area_alone():
-    disp = torch.full((20, 20), 10.0)
-    labels = torch.zeros(20, 20, dtype=torch.long)
-    area = _area([0], (0, 0, 4, 4), mean_d=10.0, contrast=-3.0)
-    assert grow_area(area, labels, disp, torch.ones(20, 20, dtype=torch.bool)) is area
 
 
 def test_remove_speckles_drops_small_islands_only():
@@ -262,12 +240,6 @@ def test_kept_areas_skips_thin_streaks_by_their_solidity():
     off = kept_areas(areas, stats, labels, AreaConfig(min_solidity=0.0), ctx)
     assert [a.neurons for a in off][0] == [2]  # kept first (the object may follow within the budget)
     assert off[0].purity == 1.0 and off[0].solidity == 0.0
-
-
-def test_kept_areas_grow_uses_the_context_disparity():
-    labels, disp, stats, areas = _speckles_and_object()
-    kept = kept_areas(areas, stats, labels, AreaConfig(grow=True), _ctx(labels, disp))
-    assert kept and kept[0].grow_threshold is not None
 
 
 def test_refine_box_drops_a_band_of_speckles_but_keeps_thin_parts_of_a_solid_piece():
