@@ -333,11 +333,12 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     caches = [SceneCache(s, None, base, loader=partial(load_frame, s, data_dir)) for s in specs]
     todo = []
     for i, c in enumerate(caches):
-        if all(_key(ov) in resumed.get(c.spec.name, {}) for ov, _ in keys):
-            c.scores = resumed[c.spec.name]
+        c.scores = dict(resumed.get(c.spec.name, {}))  # what an earlier run scored is not scored again
+        if all(_key(ov) in c.scores for ov, _ in keys):
             progress.update(1)
         else:
             todo.append(i)
+    missing = {i: [(ov, sal) for ov, sal in keys if _key(ov) not in caches[i].scores] for i in todo}
     if cfg.workers > 1 and len(todo) > 1:
         # frames in worker processes (one thread each); the scores come back, the segmentations do
         # not: a combination the choice needs later is segmented again here, deterministically
@@ -345,13 +346,13 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
         import multiprocessing as mp
 
         with cf.ProcessPoolExecutor(cfg.workers, mp_context=mp.get_context("spawn")) as pool:
-            futures = {pool.submit(_score_frame, (specs[i], base, keys, data_dir, 1)): i for i in todo}
+            futures = {pool.submit(_score_frame, (specs[i], base, missing[i], data_dir, 1)): i for i in todo}
             for fut in cf.as_completed(futures):
-                caches[futures[fut]].scores = fut.result()
+                caches[futures[fut]].scores.update(fut.result())
                 progress.update(1)
     else:
         for i in todo:
-            for ov, sal in keys:
+            for ov, sal in missing[i]:
                 caches[i].score(ov, saliency=sal)
             progress.update(1)
     if cfg.scores_out:  # the per-frame scores, so that a later run can resume from them

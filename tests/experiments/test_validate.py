@@ -74,13 +74,16 @@ def test_a_gain_in_one_frame_of_a_one_scene_dataset_is_not_certain():
     assert d.useful[0] == pytest.approx(0.05) and d.useful[1] == 0.0 and not d.adopt, d
 
 
-def test_synthetic_gains_alone_are_evidence_not_the_verdict():
+def test_synthetic_gains_decide_only_where_no_real_frame_changes():
     t = _table({"a": 10, "syn": 10}, [True, False])
     base = np.full(20, 0.5)
     cand = base.copy()
-    cand[10:] += 0.4
+    cand[10:] += 0.4  # the real frames are untouched: the evidence decides
     d = decide(t, cand, base, cand, base)
-    assert not d.adopt and d.useful == (0.0, 0.0, 0.0) and d.useful_all[0] == pytest.approx(0.2)
+    assert d.adopt and d.useful == (0.0, 0.0, 0.0) and d.useful_all[0] == pytest.approx(0.2)
+    cand[0] -= 0.2  # one real frame loses: the real data can tell, and the macro gain is not there
+    d = decide(t, cand, base, cand, base)
+    assert not d.adopt
 
 
 def test_the_all_objects_reading_may_not_drop():
