@@ -17,7 +17,7 @@ class GroundConfig(Validated):
     before removal.
 
     Verification (``rule``): ``"position"`` — where a forward camera sees its floor (``min_slope_frac``,
-    tilt in x ≤ tilt in y, ``max_top_frac``; RANSAC on the lower image half); ``"support"`` — by what
+    tilt in x ≤ tilt in y; RANSAC on the lower image half); ``"support"`` — by what
     the plane supports, at any camera pitch (``support_frac`` of the pixels on it, the pixels above
     it in compact protrusions of at most ``max_protrusion_frac``; RANSAC on the whole map);
     ``"either"`` — a plane passing either (RANSAC on the lower half). Every rule also needs ``min_inlier_frac`` and
@@ -34,8 +34,6 @@ class GroundConfig(Validated):
             of the disparity range: a floor spans it, from its horizon to the nearest thing in view;
             a seat, a bed, a table top or a slanted wall spans a part (docs/tuned_constants.md).
             Position rule (with tilt in x ≤ tilt in y).
-        max_top_frac: a plane covering more than this share of the valid pixels of the top third
-            of the image is not ground (a wall or a slanted object). Position rule.
         support_frac: support rule: the plane holds at least this share of the valid pixels (a
             floor or table top filling the view; a forward camera's floor holds 14–40 %, the
             far-room slab of oakd_pov_controllers 55 %: docs/method.md).
@@ -62,19 +60,18 @@ class GroundConfig(Validated):
     _group: ClassVar[str] = "ground"
     _constraints: ClassVar[dict[str, Any]] = {
         "enabled": BOOL, "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
-        "min_slope_frac": NON_NEGATIVE, "max_top_frac": FRACTION, "max_below_frac": FRACTION,
+        "min_slope_frac": NON_NEGATIVE, "max_below_frac": FRACTION,
         "foot_frac": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
         "constrained": BOOL, "tries": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
         "max_protrusion_frac": FRACTION,
     }
 
     enabled: bool = True
-    rule: str = "position"
+    rule: str = "either"
     tol_frac: float = 0.02
     tol_px: float = 0.5
     min_inlier_frac: float = 0.08
     min_slope_frac: float = 1.0
-    max_top_frac: float = 0.15
     max_below_frac: float = 0.1
     foot_frac: float = 0.0
     iterations: int = 400

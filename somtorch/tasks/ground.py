@@ -157,11 +157,7 @@ def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, ori
         seen = pred > tol
         behind = seen & (d < pred - tol)
         ok &= behind.sum(1) <= cfg.max_below_frac * seen.sum(1).clamp_min(1)
-    position = oriented.clone()
-    top = q[:, 1] < h // 3
-    if bool(top.any()):
-        position &= inl[:, top].float().mean(1) <= cfg.max_top_frac
-    return ok & _either(cfg.rule, position, share >= cfg.support_frac)
+    return ok & _either(cfg.rule, oriented, share >= cfg.support_frac)
 
 
 def _either(rule: str, position, support):
@@ -212,9 +208,6 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
         behind = seen & (d < plane - tol)
         if int(behind.sum()) > cfg.max_below_frac * max(int(seen.sum()), 1):
             return None
-    if position:  # ground is seen below the objects, not above them: few inliers in the top third
-        top = ok[: h // 3]
-        position = not int(top.sum()) or int(mask[: h // 3].sum()) / int(top.sum()) <= cfg.max_top_frac
     support = cfg.rule != "position" and frac >= cfg.support_frac \
         and largest_protrusion(seen & (d > plane + tol)) <= cfg.max_protrusion_frac * n_valid
     if not _either(cfg.rule, position, support):

@@ -104,7 +104,9 @@ def test_disparity_file_choice_and_single_file(shared_data):
     assert len(est.object_info) == 4 and est.camera.approximate
     single = load_scene(shared_data / "eth3d" / "terrace" / "disp0.pfm")
     assert single.name == "disp0" and single.source["layout"] == "file"
-    assert single.image is None and single.camera is None and single.objects is None
+    assert single.image is None and single.objects is None
+    # the calib.txt beside the file gives the camera (a point cloud needs one)
+    assert single.camera is not None and single.camera.focal_px == pytest.approx(711.499)
     assert single.n_valid == _shared_scene(shared_data / "eth3d" / "terrace").n_valid
 
 

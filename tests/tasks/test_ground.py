@@ -49,7 +49,12 @@ def test_a_plane_with_the_scene_behind_it_is_not_the_support_surface():
 
 def test_a_fronto_parallel_wall_and_a_disabled_search_give_no_plane():
     valid = torch.ones(H, W, dtype=torch.bool)
-    assert fit_ground_plane(torch.full((H, W), 20.0), valid, GroundConfig()) is None
+    # by position, a plane of constant disparity is a wall, not a floor ...
+    assert fit_ground_plane(torch.full((H, W), 20.0), valid, GroundConfig(rule="position")) is None
+    # ... by what it supports it may be a floor seen straight down (disparity cannot tell the two):
+    # the default rule (either) takes it, holding everything, with nothing standing on it
+    g = fit_ground_plane(torch.full((H, W), 20.0), valid, GroundConfig())
+    assert g is not None and g.support and g.inlier_frac == 1.0
     assert fit_ground_plane(_floor(), valid, GroundConfig(enabled=False)) is None
 
 
