@@ -52,8 +52,12 @@ def chunk_rows(data: torch.Tensor | np.ndarray, chunk_size: int, dtype: torch.dt
     n = int(data.shape[0])
     for s in range(0, n, chunk_size):
         part = data[s:s + chunk_size]
-        t = part if isinstance(part, torch.Tensor) else torch.from_numpy(np.ascontiguousarray(part))
-        yield t.to(dtype)
+        if not isinstance(part, torch.Tensor):
+            part = np.ascontiguousarray(part)
+            if not part.flags.writeable:  # a read-only memory map: torch wants a writable buffer
+                part = part.copy()
+            part = torch.from_numpy(part)
+        yield part.to(dtype)
 
 
 def _chunks(source: Source, chunk_size: int, weight: torch.Tensor) -> Iterator[torch.Tensor]:
