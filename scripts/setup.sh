@@ -50,7 +50,7 @@ fi
 #    there (or for the base, which every extra includes) starts at once; a new extra installs it.
 STAMP=.venv/.somtorch-setup
 HASH="$(sha256sum pyproject.toml | cut -c1-16)"
-read -r OLD_HASH OLD_EXTRAS <"$STAMP" 2>/dev/null || true
+{ read -r OLD_HASH OLD_EXTRAS <"$STAMP"; } 2>/dev/null || true  # (no stamp yet: a fresh clone)
 [ "${OLD_HASH:-}" = "$HASH" ] || OLD_EXTRAS=""
 HAVE=",${OLD_EXTRAS:-base},"
 NEED=0
