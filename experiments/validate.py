@@ -48,6 +48,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from . import CONF
 from .schema import RunConfig, register
+from .validate_report import gallery, summarize, to_markdown, verdict
 
 CONF_DIR = str(CONF)
 log = logging.getLogger("somtorch.validate")
@@ -165,51 +166,6 @@ class SceneCache:
             self.scores[key]["saliency"] = {k: sum(p[k] for p in per) / len(per) for k in per[0]}
         return self.scores[key]
 
-    def gallery(self, path: Path, overrides: dict[str, Any] | None = None, member: int = 0) -> Path:
-        """A picture of one member: disparity (turbo, px), ground mask (blue), object masks (green
-        outline), kept boxes with the tolerance (red, with confidence), and its verdict."""
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        import numpy as np
-
-        from somtorch.viz import identified_percent
-
-        if not 0 <= member < self.base.ensemble:
-            raise ValueError(f"gallery member {member} must be in [0, ensemble={self.base.ensemble})")
-        ground, members = self.members(overrides or {})
-        m = members[member]
-        sc = self.scene
-        d = np.where(sc.valid.numpy(), sc.disparity.numpy(), np.nan)
-        fig, ax = plt.subplots(figsize=(7.5, 7.5 * sc.height / sc.width + 0.8), dpi=64)
-        lo, hi = np.nanpercentile(d, [1, 99])
-        im = ax.imshow(d, cmap="turbo", vmin=lo, vmax=hi)
-        fig.colorbar(im, ax=ax, fraction=0.03, pad=0.01, label="disparity [px]")
-        if ground is not None:
-            tint = np.zeros((*ground.mask.shape, 4))
-            tint[ground.mask.numpy()] = (0.15, 0.35, 1.0, 0.7)  # RGBA: the removed ground plane
-            ax.imshow(tint)
-        if sc.objects is not None:
-            ax.contour((sc.objects > 0).numpy().astype(float), levels=[0.5], colors="lime", linewidths=1.2)
-        for a, b in zip(m.kept, m.reduction.boxes):
-            x0, y0, x1, y1 = b
-            ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ec="red", lw=2))
-            ax.text(x0 + 3, y0 + 12, f"{a.confidence:.2f}" if a.confidence is not None else "", color="red",
-                    fontsize=9, weight="bold")
-        s = m.score
-        verdict = (f"identified {identified_percent(s.identified_fraction)}, reduction {s.reduction_union:.1f} % "
-                   f"(x_opt {s.x_opt:.1f} %): {'useful' if s.useful_hit else 'not useful'}"
-                   + (", no object (whole map kept)" if m.no_object else ""))
-        ax.set_title(f"{self.spec.name} (seed {m.seed}) — {verdict}\nred: kept boxes (confidence); "
-                     "green: labelled objects; blue: ground mask", fontsize=9)
-        ax.set_axis_off()
-        fig.tight_layout()
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path)
-        plt.close(fig)
-        return path
-
 
 def _score_frame(job: tuple) -> dict[str, dict[str, Any]]:
     """A worker's job: every candidate of ``keys`` (``[(overrides, saliency)]``) on one frame."""
@@ -235,10 +191,16 @@ class Protocol:
         self.caches, self.cfg, self.grid, self.defaults = caches, cfg, grid, defaults
         self.table = FrameTable([c.spec.dataset for c in caches], [c.spec.group for c in caches],
                                 [c.spec.real for c in caches], n_boot=cfg.n_boot, seed=cfg.seed)
+        self._rates: dict[tuple[str, str], np.ndarray] = {}
 
     def rates(self, overrides: dict[str, Any], which: str = "useful_hits") -> np.ndarray:
-        """One rate (hits / runs) per frame with ``overrides`` (scored on demand, cached)."""
-        return np.array([c.score(overrides)[which] / c.score(overrides)["runs"] for c in self.caches])
+        """One rate (hits / runs) per frame with ``overrides`` (scored on demand; the array is kept,
+        as the folds ask for the same candidates again and again)."""
+        key = (_key(overrides), which)
+        if key not in self._rates:
+            rows = [c.score(overrides) for c in self.caches]
+            self._rates[key] = np.array([r[which] / r["runs"] for r in rows])
+        return self._rates[key]
 
     def decide(self, cand: dict[str, Any], base: dict[str, Any], table: Any = None) -> Any:
         """:func:`experiments.protocol.decide` of ``cand`` against ``base`` on ``table`` (default: all)."""
@@ -383,11 +345,12 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
             if ov:
                 entries.append({"value": v, "neutral": k in cfg.neutral and v == cfg.neutral[k],
                                 **proto.decide(ov, {}).as_dict()})
-        knobs[k] = {"default": defaults[k], "values": entries, "verdict": _verdict(k, entries, in_sample, cfg)}
-    summary = _summary(proto, rows)
+        knobs[k] = {"default": defaults[k], "values": entries,
+                    "verdict": verdict(k, entries, in_sample, cfg.neutral)}
+    summary = summarize(proto.table, rows)
     if cfg.gallery is not None:
         for c in caches:
-            c.gallery(Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
+            gallery(c, Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
     robustness = {t: transformed(caches, t) for t in cfg.transforms}
     return {"grid": grid, "defaults": defaults, "neutral": dict(cfg.neutral), "in_sample_choice": in_sample,
             "in_sample_steps": in_sample_steps, "folds": folds, "rows": rows, "summary": summary, "knobs": knobs,
@@ -426,41 +389,6 @@ def _progress(total: int) -> Any:
     return tqdm(total=total, desc="frames", unit="frame", disable=None)
 
 
-def _verdict(key: str, entries: list[dict[str, Any]], in_sample: dict[str, Any], cfg: ValidateConfig) -> str:
-    """``adopt <value>`` (the in-sample choice changed it), ``remove`` (its neutral value is
-    non-inferior), or ``keep``."""
-    names = key.split("+")
-    if any(n in in_sample for n in names):
-        return "adopt " + ", ".join(f"{n}={in_sample[n]}" for n in names if n in in_sample)
-    neutral = [e for e in entries if e["neutral"]]
-    if key in cfg.neutral and (not neutral or neutral[0]["non_inferior"]):
-        return "remove"
-    return "keep"
-
-
-def _summary(proto: Protocol, rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Per dataset: frames, runs, useful and all-objects rates (default / in-sample / left-out),
-    saliency of the defaults; then the macro averages over the real datasets and over all."""
-    t = proto.table
-    out: dict[str, Any] = {"datasets": {}}
-    arr = {(part, m): np.array([r[part][m] / r[part]["runs"] for r in rows])
-           for part in ("default", "in_sample", "left_out") for m in ("useful_hits", "all_objects_hits")}
-    per = {key: t.per_dataset(v) for key, v in arr.items()}
-    for d in t.names:
-        drows = [r for r in rows if r["dataset"] == d]
-        sal = [r["default"]["saliency"] for r in drows if r["default"].get("saliency")]
-        out["datasets"][d] = {
-            "real": drows[0]["real"], "frames": len(drows), "runs": sum(r["default"]["runs"] for r in drows),
-            "objects_per_frame": float(np.mean([r["default"]["n_objects"] for r in drows])),
-            "valid_share": float(np.mean([r["default"]["valid_share"] for r in drows])),
-            "x_opt": float(np.mean([r["default"]["x_opt"] for r in drows])),
-            **{f"{part}_{m}": per[(part, m)][d] for part, m in per},
-            **({k: float(np.mean([s[k] for s in sal])) for k in sal[0]} if sal else {})}
-    for label, real_only in (("real", True), ("all", False)):
-        out[f"macro_{label}"] = {f"{part}_{m}": proto.table.macro(v, real_only)[0] for (part, m), v in arr.items()}
-    return out
-
-
 def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]]:
     """The default scores of every scene of ``caches`` transformed by ``add_junk(scene, kind)``,
     by scene name. A transform is a check of the rule (a mirrored or resampled scene is as easy
@@ -479,68 +407,6 @@ def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]
         log.info("%s (%s): default %d useful of %d (%.1f s)", c.spec.name, kind, sc["useful_hits"],
                  sc["runs"], time.perf_counter() - t0)
     return out
-
-
-def _pct(x: float) -> str:
-    return "–" if x != x else f"{100 * x:.1f}"
-
-
-def _ci(t: Any) -> str:
-    return f"{100 * t[0]:+.1f} [{100 * t[1]:+.1f}, {100 * t[2]:+.1f}]"
-
-
-def to_markdown(report: dict[str, Any]) -> str:
-    """The tables: per dataset (rates in % of runs), the macro averages, every knob's decisions."""
-    sm = report["summary"]
-    out = ["Per dataset, % of runs (useful = the paper's main-object useful hit; all-obj = every labelled "
-           "object >= 95 % kept at >= 0.75 x the union-of-boxes reduction):", "",
-           "| dataset | real | frames | runs | objects / frame | valid | x_opt | default useful | in-sample useful | "
-           "**left-out useful** | default all-obj | in-sample all-obj | **left-out all-obj** | F | MAE | S |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for d, r in sm["datasets"].items():
-        out.append(f"| {d} | {'yes' if r['real'] else 'no'} | {r['frames']} | {r['runs']} | {r['objects_per_frame']:.1f} | "
-                   f"{100 * r['valid_share']:.0f} % | {r['x_opt']:.1f} | {_pct(r['default_useful_hits'])} | "
-                   f"{_pct(r['in_sample_useful_hits'])} | **{_pct(r['left_out_useful_hits'])}** | "
-                   f"{_pct(r['default_all_objects_hits'])} | {_pct(r['in_sample_all_objects_hits'])} | "
-                   f"**{_pct(r['left_out_all_objects_hits'])}** | {r.get('f_measure', float('nan')):.2f} | "
-                   f"{r.get('mae', float('nan')):.3f} | {r.get('s_measure', float('nan')):.2f} |")
-    for label in ("real", "all"):
-        m = sm[f"macro_{label}"]
-        out.append(f"| **macro, {label}** | | | | | | | {_pct(m['default_useful_hits'])} | {_pct(m['in_sample_useful_hits'])} | "
-                   f"**{_pct(m['left_out_useful_hits'])}** | {_pct(m['default_all_objects_hits'])} | "
-                   f"{_pct(m['in_sample_all_objects_hits'])} | **{_pct(m['left_out_all_objects_hits'])}** | | | |")
-    choice = report["in_sample_choice"]
-    out += ["", f"In-sample choice: {', '.join(f'{k}={v}' for k, v in choice.items()) or 'the defaults'}.", "",
-            "Left-out choices (each made without the dataset):", ""]
-    by_choice: dict[str, list[str]] = {}
-    for d, f in report["folds"].items():
-        by_choice.setdefault(", ".join(f"{k}={v}" for k, v in f["choice"].items()) or "the defaults", []).append(d)
-    for c, ds in by_choice.items():
-        out.append(f"- {c}: {', '.join(ds)}")
-    out += ["", "Every knob, each value against the defaults (paired, same seeds; differences in points of the "
-            "useful-hit rate, real macro with its 95 % bootstrap interval; worst = the dataset of the largest loss):", "",
-            "| knob | default | value | useful, real macro | all-obj, real macro | useful, all datasets | worst | "
-            "adoptable | non-inferior | verdict |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for k, kn in report["knobs"].items():
-        for i, e in enumerate(kn["values"]):
-            out.append(f"| {k if i == 0 else ''} | {kn['default'] if i == 0 else ''} | {e['value']}"
-                       f"{' (neutral)' if e['neutral'] else ''} | {_ci(e['useful'])} | {_ci(e['all_objects'])} | "
-                       f"{_ci(e['useful_all'])} | {e['worst'][0]} {100 * e['worst'][1]:+.1f} | "
-                       f"{'yes' if e['adopt'] else 'no'} | {'yes' if e['non_inferior'] else 'no'} | "
-                       f"{kn['verdict'] if i == 0 else ''} |")
-    robust = report.get("robustness") or {}
-    if robust:
-        kinds = list(robust)
-        out += ["", "Robustness (defaults; every frame transformed; useful / all-objects hits):", "",
-                "| transform | useful | all-obj | runs |", "|---|---|---|---|"]
-        base = [r["default"] for r in report["rows"]]
-        out.append(f"| as given | {sum(b['useful_hits'] for b in base)} | {sum(b['all_objects_hits'] for b in base)} | "
-                   f"{sum(b['runs'] for b in base)} |")
-        for k in kinds:
-            v = list(robust[k].values())
-            out.append(f"| {k} | {sum(x['useful_hits'] for x in v)} | {sum(x['all_objects_hits'] for x in v)} | "
-                       f"{sum(x['runs'] for x in v)} |")
-    return "\n".join(out) + "\n"
 
 
 ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)

@@ -145,7 +145,7 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
          "train.epochs=3", "frames=[kitti,kitti_est,oakd_toy,oakd_cycles,eth3d_terrace]",
          f"paths.data_dir={shared_data}", "n_boot=200", "~grid", "~neutral",
          "+grid={objects.merge: [0.0, 0.5], reduction.tolerance_image: [0.03]}", "+neutral={objects.merge: 0.0}",
-         "transforms=[flip]"],
+         "transforms=[flip]", f"gallery={tmp_path / 'gallery'}"],
         cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     rep = json.loads((tmp_path / "validate.json").read_text())
@@ -169,6 +169,7 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     md = (tmp_path / "validate.md").read_text()
     assert "| **macro, real** |" in md and "| objects.merge | 0.75 | 0.0 (neutral) |" in md
     assert list(rep["robustness"]) == ["flip"] and "| flip |" in md
+    assert sorted(p.name for p in (tmp_path / "gallery").glob("*.png")) == sorted(f"{r['frame']}.png" for r in rep["rows"])
 
 
 def _toy_scene():

@@ -1,0 +1,154 @@
+"""The reports of ``python -m experiments.validate``: each knob's verdict, the per-dataset summary
+with the macro averages, and ``validate.md`` (split from :mod:`experiments.validate`, which runs
+the protocol)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["gallery", "summarize", "to_markdown", "verdict"]
+
+
+def verdict(key: str, entries: list[dict[str, Any]], in_sample: dict[str, Any], neutral: dict[str, Any]) -> str:
+    """``adopt <value>`` (the in-sample choice changed it), ``remove`` (its neutral value is
+    non-inferior), or ``keep``."""
+    names = key.split("+")
+    if any(n in in_sample for n in names):
+        return "adopt " + ", ".join(f"{n}={in_sample[n]}" for n in names if n in in_sample)
+    off = [e for e in entries if e["neutral"]]
+    if key in neutral and (not off or off[0]["non_inferior"]):
+        return "remove"
+    return "keep"
+
+
+def summarize(t: Any, rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per dataset: frames, runs, useful and all-objects rates (default / in-sample / left-out),
+    saliency of the defaults; then the macro averages over the real datasets and over all."""
+    out: dict[str, Any] = {"datasets": {}}
+    arr = {(part, m): np.array([r[part][m] / r[part]["runs"] for r in rows])
+           for part in ("default", "in_sample", "left_out") for m in ("useful_hits", "all_objects_hits")}
+    per = {key: t.per_dataset(v) for key, v in arr.items()}
+    for d in t.names:
+        drows = [r for r in rows if r["dataset"] == d]
+        sal = [r["default"]["saliency"] for r in drows if r["default"].get("saliency")]
+        out["datasets"][d] = {
+            "real": drows[0]["real"], "frames": len(drows), "runs": sum(r["default"]["runs"] for r in drows),
+            "objects_per_frame": float(np.mean([r["default"]["n_objects"] for r in drows])),
+            "valid_share": float(np.mean([r["default"]["valid_share"] for r in drows])),
+            "x_opt": float(np.mean([r["default"]["x_opt"] for r in drows])),
+            **{f"{part}_{m}": per[(part, m)][d] for part, m in per},
+            **({k: float(np.mean([s[k] for s in sal])) for k in sal[0]} if sal else {})}
+    for label, real_only in (("real", True), ("all", False)):
+        out[f"macro_{label}"] = {f"{part}_{m}": t.macro(v, real_only)[0] for (part, m), v in arr.items()}
+    return out
+
+
+def _pct(x: float) -> str:
+    return "–" if x != x else f"{100 * x:.1f}"
+
+
+def _ci(t: Any) -> str:
+    return f"{100 * t[0]:+.1f} [{100 * t[1]:+.1f}, {100 * t[2]:+.1f}]"
+
+
+def to_markdown(report: dict[str, Any]) -> str:
+    """The tables: per dataset (rates in % of runs), the macro averages, every knob's decisions."""
+    sm = report["summary"]
+    out = ["Per dataset, % of runs (useful = the paper's main-object useful hit; all-obj = every labelled "
+           "object >= 95 % kept at >= 0.75 x the union-of-boxes reduction):", "",
+           "| dataset | real | frames | runs | objects / frame | valid | x_opt | default useful | in-sample useful | "
+           "**left-out useful** | default all-obj | in-sample all-obj | **left-out all-obj** | F | MAE | S |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for d, r in sm["datasets"].items():
+        out.append(f"| {d} | {'yes' if r['real'] else 'no'} | {r['frames']} | {r['runs']} | {r['objects_per_frame']:.1f} | "
+                   f"{100 * r['valid_share']:.0f} % | {r['x_opt']:.1f} | {_pct(r['default_useful_hits'])} | "
+                   f"{_pct(r['in_sample_useful_hits'])} | **{_pct(r['left_out_useful_hits'])}** | "
+                   f"{_pct(r['default_all_objects_hits'])} | {_pct(r['in_sample_all_objects_hits'])} | "
+                   f"**{_pct(r['left_out_all_objects_hits'])}** | {r.get('f_measure', float('nan')):.2f} | "
+                   f"{r.get('mae', float('nan')):.3f} | {r.get('s_measure', float('nan')):.2f} |")
+    for label in ("real", "all"):
+        m = sm[f"macro_{label}"]
+        out.append(f"| **macro, {label}** | | | | | | | {_pct(m['default_useful_hits'])} | {_pct(m['in_sample_useful_hits'])} | "
+                   f"**{_pct(m['left_out_useful_hits'])}** | {_pct(m['default_all_objects_hits'])} | "
+                   f"{_pct(m['in_sample_all_objects_hits'])} | **{_pct(m['left_out_all_objects_hits'])}** | | | |")
+    choice = report["in_sample_choice"]
+    out += ["", f"In-sample choice: {', '.join(f'{k}={v}' for k, v in choice.items()) or 'the defaults'}.", "",
+            "Left-out choices (each made without the dataset):", ""]
+    by_choice: dict[str, list[str]] = {}
+    for d, f in report["folds"].items():
+        by_choice.setdefault(", ".join(f"{k}={v}" for k, v in f["choice"].items()) or "the defaults", []).append(d)
+    for c, ds in by_choice.items():
+        out.append(f"- {c}: {', '.join(ds)}")
+    out += ["", "Every knob, each value against the defaults (paired, same seeds; differences in points of the "
+            "useful-hit rate, real macro with its 95 % bootstrap interval; worst = the dataset of the largest loss):", "",
+            "| knob | default | value | useful, real macro | all-obj, real macro | useful, all datasets | worst | "
+            "adoptable | non-inferior | verdict |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for k, kn in report["knobs"].items():
+        for i, e in enumerate(kn["values"]):
+            out.append(f"| {k if i == 0 else ''} | {kn['default'] if i == 0 else ''} | {e['value']}"
+                       f"{' (neutral)' if e['neutral'] else ''} | {_ci(e['useful'])} | {_ci(e['all_objects'])} | "
+                       f"{_ci(e['useful_all'])} | {e['worst'][0]} {100 * e['worst'][1]:+.1f} | "
+                       f"{'yes' if e['adopt'] else 'no'} | {'yes' if e['non_inferior'] else 'no'} | "
+                       f"{kn['verdict'] if i == 0 else ''} |")
+    robust = report.get("robustness") or {}
+    if robust:
+        kinds = list(robust)
+        out += ["", "Robustness (defaults; every frame transformed; useful / all-objects hits):", "",
+                "| transform | useful | all-obj | runs |", "|---|---|---|---|"]
+        base = [r["default"] for r in report["rows"]]
+        out.append(f"| as given | {sum(b['useful_hits'] for b in base)} | {sum(b['all_objects_hits'] for b in base)} | "
+                   f"{sum(b['runs'] for b in base)} |")
+        for k in kinds:
+            v = list(robust[k].values())
+            out.append(f"| {k} | {sum(x['useful_hits'] for x in v)} | {sum(x['all_objects_hits'] for x in v)} | "
+                       f"{sum(x['runs'] for x in v)} |")
+    return "\n".join(out) + "\n"
+
+
+def gallery(cache: Any, path: Path, overrides: dict[str, Any] | None = None, member: int = 0) -> Path:
+    """A picture of one member of a frame cache (:class:`experiments.validate.SceneCache`): disparity (turbo, px), ground mask (blue), object masks (green
+    outline), kept boxes with the tolerance (red, with confidence), and its verdict."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from somtorch.viz import identified_percent
+
+    if not 0 <= member < cache.base.ensemble:
+        raise ValueError(f"gallery member {member} must be in [0, ensemble={cache.base.ensemble})")
+    ground, members = cache.members(overrides or {})
+    m = members[member]
+    sc = cache.scene
+    d = np.where(sc.valid.numpy(), sc.disparity.numpy(), np.nan)
+    fig, ax = plt.subplots(figsize=(7.5, 7.5 * sc.height / sc.width + 0.8), dpi=64)
+    lo, hi = np.nanpercentile(d, [1, 99])
+    im = ax.imshow(d, cmap="turbo", vmin=lo, vmax=hi)
+    fig.colorbar(im, ax=ax, fraction=0.03, pad=0.01, label="disparity [px]")
+    if ground is not None:
+        tint = np.zeros((*ground.mask.shape, 4))
+        tint[ground.mask.numpy()] = (0.15, 0.35, 1.0, 0.7)  # RGBA: the removed ground plane
+        ax.imshow(tint)
+    if sc.objects is not None:
+        ax.contour((sc.objects > 0).numpy().astype(float), levels=[0.5], colors="lime", linewidths=1.2)
+    for a, b in zip(m.kept, m.reduction.boxes):
+        x0, y0, x1, y1 = b
+        ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ec="red", lw=2))
+        ax.text(x0 + 3, y0 + 12, f"{a.confidence:.2f}" if a.confidence is not None else "", color="red",
+                fontsize=9, weight="bold")
+    s = m.score
+    said = (f"identified {identified_percent(s.identified_fraction)}, reduction {s.reduction_union:.1f} % "
+               f"(x_opt {s.x_opt:.1f} %): {'useful' if s.useful_hit else 'not useful'}"
+               + (", no object (whole map kept)" if m.no_object else ""))
+    ax.set_title(f"{cache.spec.name} (seed {m.seed}) — {said}\nred: kept boxes (confidence); "
+                 "green: labelled objects; blue: ground mask", fontsize=9)
+    ax.set_axis_off()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
