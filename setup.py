@@ -15,5 +15,6 @@ conf_packages = ["somtorch_experiments.conf"] + sorted(
     "somtorch_experiments.conf." + ".".join(d.relative_to(CONF).parts)
     for d in CONF.rglob("*") if d.is_dir() and not d.name.startswith((".", "__")))
 
-setup(packages=find_packages(include=["somtorch", "somtorch.*"]) + ["somtorch_experiments", *conf_packages],
+setup(packages=find_packages(include=["somtorch", "somtorch.*"]) + ["somtorch_experiments", *conf_packages,
+                                                                      "hydra_plugins.somtorch_launcher"],
       package_data={"somtorch": ["py.typed", "core/csrc/*.cpp"], **{p: ["*.yaml", "*.json"] for p in conf_packages}})

@@ -203,8 +203,11 @@ def quiet() -> bool:
 
 
 def show_progress() -> bool:
-    """Progress bars only for a person watching: a terminal on stderr and no ``--quiet``."""
-    return not quiet() and sys.stderr.isatty()
+    """Progress bars only for a person watching: a terminal on stderr, no ``--quiet``, and not in a
+    worker of the somtorch launcher (``SOMTORCH_PROGRESS=0``: side by side, bars overwrite each other)."""
+    import os
+
+    return not quiet() and os.environ.get("SOMTORCH_PROGRESS") != "0" and sys.stderr.isatty()
 
 
 def launcher_jobs() -> int:

@@ -99,6 +99,12 @@ def register() -> None:
     # ${experiments_pkg:}: this package's import name (experiments in a checkout, somtorch_experiments
     # installed), for the _target_ of Hydra callbacks in conf/
     OmegaConf.register_new_resolver("experiments_pkg", lambda: __package__, replace=True)
+    # hydra/launcher=somtorch: Hydra finds plugins by scanning the hydra_plugins folders on sys.path,
+    # which an editable install's import hook does not list; registered here, it is found either way
+    from hydra.core.plugins import Plugins
+    from hydra_plugins.somtorch_launcher.launcher import SomtorchLauncher
+
+    Plugins.instance().register(SomtorchLauncher)
 
 
 def log_to_file(log: logging.Logger, level: int, msg: str, *args: object) -> None:

@@ -1,12 +1,14 @@
-"""What a study sweep says before and while it runs (a Hydra callback, ``conf/study.yaml``).
+"""What a study sweep says before and while it runs.
 
-Before the first job: the number of jobs and a rough time estimate (each job's config composed as
-the sweeper will compose it, its scene read once per data set, and the time of
-:func:`somtorch.resources.estimate` summed; the largest peak memory too). While the jobs run: one
-progress bar across the jobs (the basic launcher runs them in this process; a launcher that runs
-them elsewhere gets the line, not the bar). Inside a job the training bar counts the epochs (steps
-of the online rule) and, with ``execution=separate``, a bar counts the runs. Every bar is off with
-``--quiet`` or when stderr is not a terminal (``experiments.cli.show_progress``).
+The default launcher (``hydra/launcher=somtorch``, ``hydra_plugins/somtorch_launcher``) prints the
+number of jobs, a rough time estimate with its worker count and the largest peak memory, then counts
+the jobs with a bar; it asks :func:`job_estimate` about each job (its scene read once per data set,
+:func:`somtorch.pipeline.resource_estimate` times its runs). With another launcher (basic, joblib,
+Ray, SLURM) the callback :class:`StudyProgress` (``conf/study.yaml``) prints the same line, summed
+over the jobs, and a bar when the jobs run in this process. Inside a job the training bar counts
+the epochs (steps of the online rule) and, with ``execution=separate``, a bar counts the runs. Every
+bar is off with ``--quiet``, when stderr is not a terminal, and in the launcher's workers
+(``experiments.cli.show_progress``).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 log = logging.getLogger("somtorch.study")
+SOMTORCH_LAUNCHER = "hydra_plugins.somtorch_launcher."
 
 
 def sweep_jobs(config: DictConfig) -> list[list[str]]:
@@ -32,42 +35,53 @@ def sweep_jobs(config: DictConfig) -> list[list[str]]:
     return [job for batch in BasicSweeper.split_arguments(parsed, None) for job in batch]
 
 
-def estimate_jobs(config: DictConfig, jobs: list[list[str]]) -> tuple[float, int, int]:
-    """``(seconds, largest peak bytes, jobs estimated)`` of the sweep's jobs; a job whose config
-    or scene cannot be read is left out (it fails with its own message when its turn comes)."""
-    import dataclasses
+_scenes: dict[str, Any] = {}  # scenes read for estimates, by data config (a sweep reads each once)
 
-    from hydra.core.global_hydra import GlobalHydra
+
+def job_estimate(composed: DictConfig) -> tuple[float, int]:
+    """``(seconds, peak bytes)`` of one job from its composed config (without the ``hydra`` node):
+    :func:`somtorch.pipeline.resource_estimate` of its scene, times its runs and repeats. Raises
+    when the config or the scene cannot be read (the caller leaves the job out of the estimate)."""
+    import dataclasses
 
     from .run import load_input
     from somtorch.pipeline import resource_estimate
 
+    cfg = OmegaConf.to_object(composed)
+    resize = getattr(cfg, "resize", None)
+    key = repr(OmegaConf.to_container(OmegaConf.structured(cfg.data))) + repr(resize)
+    if key not in _scenes:
+        scene = load_input(cfg)
+        if resize is not None:
+            from somtorch.disparity.resize import resize_scene
+
+            scene = resize_scene(scene, int(resize[0]), int(resize[1]))
+        _scenes[key] = scene
+    separate = getattr(cfg, "execution", "ensemble") == "separate" and cfg.runs > 1
+    repeats = getattr(cfg, "repeats", 1)
+    one = dataclasses.replace(cfg, ensemble=1) if separate else cfg
+    est = resource_estimate(_scenes[key], one).times((cfg.runs if separate else 1) * (repeats + (repeats > 1)))
+    return est.seconds, est.peak_bytes
+
+
+def estimate_jobs(config: DictConfig, jobs: list[list[str]]) -> tuple[float, int, int]:
+    """``(seconds, largest peak bytes, jobs estimated)`` of the sweep's jobs; a job whose config
+    or scene cannot be read is left out (it fails with its own message when its turn comes)."""
+    from hydra.core.global_hydra import GlobalHydra
+
     loader = GlobalHydra.instance().config_loader()
-    scenes: dict[str, Any] = {}
     seconds, peak, done = 0.0, 0, 0
     for job in jobs:
         try:
             composed = loader.load_sweep_config(config, list(job))
             with open_dict(composed):
                 del composed["hydra"]  # its ${hydra:...} values need a running job
-            cfg = OmegaConf.to_object(composed)
-            key = repr(OmegaConf.to_container(OmegaConf.structured(cfg.data))) + repr(cfg.resize)
-            if key not in scenes:
-                scene = load_input(cfg)
-                if cfg.resize is not None:
-                    from somtorch.disparity.resize import resize_scene
-
-                    scene = resize_scene(scene, int(cfg.resize[0]), int(cfg.resize[1]))
-                scenes[key] = scene
-            separate = cfg.execution == "separate" and cfg.runs > 1
-            one = dataclasses.replace(cfg, ensemble=1) if separate else cfg
-            est = resource_estimate(scenes[key], one).times((cfg.runs if separate else 1)
-                                                            * (cfg.repeats + (cfg.repeats > 1)))
+            s, p = job_estimate(composed)
         except Exception as e:  # noqa: BLE001 - an estimate must never stop the sweep
             log.debug("no estimate for job %s: %s", job, e)
             continue
-        seconds += est.seconds
-        peak = max(peak, est.peak_bytes)
+        seconds += s
+        peak = max(peak, p)
         done += 1
     return seconds, peak, done
 
@@ -80,6 +94,9 @@ class StudyProgress(Callback):
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         from tqdm.auto import tqdm
+
+        if str(config.hydra.launcher.get("_target_", "")).startswith(SOMTORCH_LAUNCHER):
+            return  # the somtorch launcher says it (with its worker count) and counts the jobs itself
 
         from .cli import quiet, show_progress
         from somtorch.resources import fmt_bytes, fmt_seconds

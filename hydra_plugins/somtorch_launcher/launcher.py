@@ -1,0 +1,412 @@
+"""``hydra/launcher=somtorch``: the jobs of a sweep side by side on the cores that are free.
+
+The default launcher of ``somtorch-study`` (``conf/study.yaml``). Before the first job it
+
+1. composes every job's config (once, here: the workers receive them composed);
+2. asks ``estimate`` (a function named by its dotted path, called with a job's composed config
+   without its ``hydra`` node; it returns ``(seconds, peak_bytes)`` or None) about each job;
+3. picks the number of workers: ``n_jobs`` if given (negative counts as joblib does: −1 = every
+   core), else the cores free to this process (its affinity mask and cgroup quota, less what other
+   processes kept busy meanwhile), at most the number of jobs, at most what the memory available
+   holds at the largest estimated peak (``resources.max_memory_frac`` of it), and 1 when a job
+   runs on a GPU (one device, not one per worker);
+4. prints one line: the job count, the estimated wall time with that many workers (longest jobs
+   first), the largest peak memory, the workers and the threads each job gets.
+
+The jobs then run longest-first in spawned worker processes, each on ``cores // workers`` torch
+threads (a job reads ``hydra.launcher.n_jobs``: ``experiments.cli.launcher_jobs``); a bar in this
+process counts the jobs, the workers show none. With one worker the jobs run here, in order, as
+Hydra's basic launcher runs them. The worker count never changes a result: every job gives the
+same bits at any thread count (tests/core), and tests/experiments compares this launcher's sweep
+with the basic launcher's.
+
+Hydra's job callbacks run in this process: ``on_job_start`` when a job is handed to a worker,
+``on_job_end`` when its result is back. A job that raises is reported after the sweep, as the
+basic sweeper does; a job that exits (a bad input's one-line error, status 2) lets the running
+jobs finish, starts no other and ends the sweep with its status. SIGINT / SIGTERM stop the
+running jobs (each marks its folder ``FAILED``) and end the sweep with one line and 130 / 143. A
+worker that dies (killed, out of memory) fails its job with the signal's name; a new worker
+takes the next job.
+"""
+
+from __future__ import annotations
+
+import heapq
+import importlib
+import logging
+import os
+import pickle
+import signal
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, NamedTuple, Optional
+
+from hydra.core.hydra_config import HydraConfig
+from hydra.core.singleton import Singleton
+from hydra.core.utils import JobReturn, JobStatus, configure_log, filter_overrides, run_job, setup_globals
+from hydra.plugins.launcher import Launcher
+from hydra.types import HydraContext, TaskFunction
+from omegaconf import DictConfig, OmegaConf, open_dict
+
+log = logging.getLogger(__name__)
+ENV_PROGRESS = "SOMTORCH_PROGRESS"  # "0" in the workers: their bars would overwrite each other
+STOP_WAIT_S = 20.0  # how long stopped workers get to mark their folders before they are killed
+
+
+class Plan(NamedTuple):
+    """How a sweep runs: the order jobs are handed out, the workers, threads per job, the estimate.
+
+    (A NamedTuple, not a dataclass: Hydra's plugin scan runs this module outside ``sys.modules``.)
+    """
+
+    order: list[int]
+    workers: int
+    threads: int
+    wall_s: Optional[float]
+    peak_bytes: Optional[int]
+    estimated: int
+
+
+def makespan(seconds: Sequence[float], workers: int) -> float:
+    """Wall time of jobs of ``seconds`` handed longest first to ``workers`` (each takes the next
+    job when it is free)."""
+    loads = [0.0] * max(1, workers)
+    for s in sorted(seconds, reverse=True):
+        heapq.heapreplace(loads, loads[0] + s)
+    return max(loads)
+
+
+def choose_workers(n_jobs: Optional[int], jobs: int, *, cores: int, free: Optional[int],
+                   peak_bytes: Optional[int], memory_bytes: Optional[float], gpu: bool) -> int:
+    """The number of jobs to run side by side (see the module docstring)."""
+    if jobs <= 1 or gpu:
+        return 1
+    if n_jobs is not None and int(n_jobs) != 0:
+        n = int(n_jobs)
+        return max(1, min(jobs, cores + 1 + n if n < 0 else n))
+    n = min(jobs, cores if free is None else max(1, min(cores, free)))
+    if peak_bytes and memory_bytes:
+        n = min(n, max(1, int(memory_bytes // peak_bytes)))
+    return max(1, n)
+
+
+class SomtorchLauncher(Launcher):
+    """Runs a sweep's jobs in worker processes, as many side by side as cores are free.
+
+    Args:
+        n_jobs: jobs side by side; None = as many as cores are free (see the module docstring).
+        estimate: dotted path of ``f(config) -> (seconds, peak_bytes) | None`` for one job.
+    """
+
+    def __init__(self, n_jobs: Optional[int] = None, estimate: Optional[str] = None) -> None:
+        self.n_jobs = n_jobs
+        self.estimate = estimate
+        self.config: Optional[DictConfig] = None
+        self.task_function: Optional[TaskFunction] = None
+        self.hydra_context: Optional[HydraContext] = None
+
+    def setup(self, *, hydra_context: HydraContext, task_function: TaskFunction, config: DictConfig) -> None:
+        self.config, self.hydra_context, self.task_function = config, hydra_context, task_function
+
+    # ------------------------------------------------------------------ planning
+    def _compose(self, idx: int, overrides: Sequence[str]) -> DictConfig:
+        assert self.hydra_context is not None and self.config is not None
+        cfg = self.hydra_context.config_loader.load_sweep_config(self.config, list(overrides))
+        with open_dict(cfg):
+            cfg.hydra.job.id = idx
+            cfg.hydra.job.num = idx
+        return cfg
+
+    def _estimates(self, configs: list[DictConfig]) -> list[Optional[tuple[float, int]]]:
+        if not self.estimate:
+            return [None] * len(configs)
+        try:
+            fn: Callable[[DictConfig], Any] = _locate(self.estimate)
+        except (ImportError, AttributeError) as e:
+            log.warning("no time estimate: %s cannot be imported (%s)", self.estimate, e)
+            return [None] * len(configs)
+        out: list[Optional[tuple[float, int]]] = []
+        for cfg in configs:
+            job = cfg.copy()
+            with open_dict(job):
+                del job["hydra"]  # its ${hydra:...} values need a running job
+            try:
+                est = fn(job)
+            except Exception as e:  # noqa: BLE001 - an estimate never stops a sweep; the job fails on its own
+                log.debug("no estimate for job %s: %s", cfg.hydra.job.num, e)
+                est = None
+            out.append(None if est is None else (float(est[0]), int(est[1])))
+        return out
+
+    def _plan(self, configs: list[DictConfig], estimates: list[Optional[tuple[float, int]]],
+              free: Optional[int]) -> Plan:
+        from somtorch.core.threads import available_cores
+        from somtorch.resources import available_memory
+
+        cores = available_cores()
+        known = [e for e in estimates if e is not None]
+        peak = max((e[1] for e in known), default=None)
+        frac = float(OmegaConf.select(configs[0], "resources.max_memory_frac", default=0.8) or 0.8)
+        memory = available_memory()[0] * frac if peak else None
+        gpu = any(not str(OmegaConf.select(c, "device", default="cpu") or "cpu").startswith("cpu") for c in configs)
+        workers = choose_workers(self.n_jobs, len(configs), cores=cores, free=free, peak_bytes=peak,
+                                 memory_bytes=memory, gpu=gpu)
+        threads = max(1, cores // workers)
+        order = list(range(len(configs)))
+        wall = None
+        if known:
+            # jobs without an estimate count as the mean of the others (for the order and the wall time)
+            mean = sum(e[0] for e in known) / len(known)
+            secs = [e[0] if e is not None else mean for e in estimates]
+            if workers > 1:
+                order.sort(key=lambda i: -secs[i])
+            wall = makespan(secs, workers)
+        return Plan(order, workers, threads, wall, peak, len(known))
+
+    def _announce(self, plan: Plan, jobs: int) -> None:
+        from somtorch.resources import fmt_bytes, fmt_seconds
+
+        assert self.config is not None
+        name = self.config.get("study") or self.config.hydra.job.name
+        if plan.estimated:
+            est = (f"estimated ~{fmt_seconds(plan.wall_s or 0.0)} in all (rough: from the sizes of "
+                   f"{plan.estimated} job(s)), largest peak memory ~{fmt_bytes(plan.peak_bytes or 0)}")
+        else:
+            est = "no time estimate (no job's config and scene could be read ahead)"
+        side = (f"; {plan.workers} side by side, {plan.threads} thread(s) each" if plan.workers > 1
+                else "; one after another")
+        if os.environ.get("SOMTORCH_QUIET") != "1":
+            print(f"study {name}: {jobs} jobs, {est}{side}", file=sys.stderr, flush=True)
+
+    # ------------------------------------------------------------------ running
+    def launch(self, job_overrides: Sequence[Sequence[str]], initial_job_idx: int) -> Sequence[JobReturn]:
+        from somtorch.core.threads import FreeCoreMonitor, available_cores
+
+        setup_globals()
+        assert self.config is not None and self.hydra_context is not None and self.task_function is not None
+        configure_log(self.config.hydra.hydra_logging, self.config.hydra.verbose)
+        Path(str(self.config.hydra.sweep.dir)).mkdir(parents=True, exist_ok=True)
+        monitor = FreeCoreMonitor(window_s=0.05)
+        monitor.free(available_cores())  # first sample; the second after composing and estimating
+        configs = [self._compose(initial_job_idx + i, ov) for i, ov in enumerate(job_overrides)]
+        plan = self._plan(configs, self._estimates(configs), monitor.free(available_cores()))
+        for cfg in configs:
+            with open_dict(cfg):
+                cfg.hydra.launcher.n_jobs = plan.workers  # the job's thread share (experiments.cli.launcher_jobs)
+        self._announce(plan, len(configs))
+        log.info("Launching %d jobs locally%s", len(configs),
+                 f", {plan.workers} side by side" if plan.workers > 1 else "")
+        for i, ov in enumerate(job_overrides):
+            log.info("\t#%d : %s", initial_job_idx + i, " ".join(filter_overrides(ov)))
+        bar = _bar(len(configs), self.config)
+        try:
+            if plan.workers == 1:
+                return self._in_process(configs, bar)
+            return _Pool(self, configs, plan, bar).run()
+        finally:
+            bar.close()
+
+    def _in_process(self, configs: list[DictConfig], bar: Any) -> list[JobReturn]:
+        assert self.config is not None and self.hydra_context is not None and self.task_function is not None
+        runs = []
+        for cfg in configs:
+            runs.append(run_job(hydra_context=self.hydra_context, task_function=self.task_function, config=cfg,
+                                job_dir_key="hydra.sweep.dir", job_subdir_key="hydra.sweep.subdir"))
+            configure_log(self.config.hydra.hydra_logging, self.config.hydra.verbose)
+            bar.update()
+        return runs
+
+
+def _bar(total: int, config: DictConfig) -> Any:
+    from tqdm.auto import tqdm
+
+    shown = (os.environ.get("SOMTORCH_QUIET") != "1" and os.environ.get(ENV_PROGRESS) != "0"
+             and sys.stderr.isatty())
+    name = config.get("study") or config.hydra.job.name
+    return tqdm(total=total, desc=f"{name} jobs", unit="job", disable=not shown, position=0, dynamic_ncols=True)
+
+
+def _locate(path: str) -> Any:
+    module, _, name = path.rpartition(".")
+    return getattr(importlib.import_module(module), name)
+
+
+def _task_reference(fn: TaskFunction) -> tuple[str, str]:
+    """(module, name) a worker imports the task function by; ``__main__`` by the name it was run as."""
+    module = fn.__module__
+    if module == "__main__":
+        spec = getattr(sys.modules["__main__"], "__spec__", None)
+        module = spec.name if spec is not None else "__mp_main__"  # a script: spawn imports it so
+    return module, fn.__qualname__
+
+
+def _task_function(module: str, name: str) -> TaskFunction:
+    fn = getattr(importlib.import_module(module), name)
+    return getattr(fn, "__wrapped__", fn)  # the function under @hydra.main, as Hydra calls it
+
+
+def _portable(ret: JobReturn) -> JobReturn:
+    """``ret`` with a return value or exception that survives pickling (else its text)."""
+    try:
+        pickle.dumps(ret._return_value)
+    except Exception:  # noqa: BLE001 - any unpicklable value is replaced by its text
+        value = ret._return_value
+        ret._return_value = RuntimeError(f"{type(value).__name__}: {value}") if ret.status == JobStatus.FAILED \
+            else repr(value)
+    return ret
+
+
+def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> None:
+    """A worker: run the composed configs that arrive on ``conn`` until None (or the pipe closes)."""
+    from hydra._internal.callbacks import Callbacks
+
+    from hydra.core.plugins import Plugins
+
+    setup_globals()  # Hydra's resolvers; the task's module registers its own when imported (next)
+    task_function = _task_function(*task)
+    Singleton._instances = pickle.loads(state)  # as Singleton.set_state, without the resolvers: closures
+    Plugins.instance()                          # do not pickle, and the imports above made them
+    context = HydraContext(config_loader=pickle.loads(loader), callbacks=Callbacks())  # callbacks run in the parent
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        if msg is None:
+            return
+        config = pickle.loads(msg)
+        HydraConfig.instance().set_config(config)
+        try:
+            ret = run_job(hydra_context=context, task_function=task_function, config=config,
+                          job_dir_key="hydra.sweep.dir", job_subdir_key="hydra.sweep.subdir")
+        except SystemExit as e:  # the job's one-line error or an interrupt: it has said why
+            conn.send(("exit", e.code if isinstance(e.code, int) else 1))
+            return
+        except BaseException as e:  # noqa: BLE001 - a signal outside the job's handler
+            conn.send(("exit", 128 + int(getattr(e, "signum", signal.SIGINT))))
+            return
+        conn.send(("done", pickle.dumps(_portable(ret))))
+
+
+class _Pool:
+    """The workers of one launch: one pipe each, jobs handed out one at a time."""
+
+    def __init__(self, launcher: SomtorchLauncher, configs: list[DictConfig], plan: Plan, bar: Any) -> None:
+        assert launcher.hydra_context is not None and launcher.task_function is not None
+        self.launcher, self.configs, self.plan, self.bar = launcher, configs, plan, bar
+        self.callbacks = launcher.hydra_context.callbacks
+        self.args = (_task_reference(launcher.task_function), pickle.dumps(launcher.hydra_context.config_loader),
+                     pickle.dumps(Singleton.get_state()["instances"]))
+        self.ctx = __import__("multiprocessing").get_context("spawn")
+        self.workers: dict[Any, tuple[Any, Optional[int]]] = {}  # process -> (pipe, job position or None)
+        self.results: list[Optional[JobReturn]] = [None] * len(configs)
+        self.todo = list(plan.order)
+        self.exit_code: Optional[int] = None
+
+    def _start(self) -> None:
+        parent, child = self.ctx.Pipe()
+        proc = self.ctx.Process(target=_serve, args=(child, *self.args), daemon=True)
+        old = os.environ.get(ENV_PROGRESS)
+        os.environ[ENV_PROGRESS] = "0"  # inherited by the spawned worker only
+        try:
+            proc.start()
+        finally:
+            if old is None:
+                os.environ.pop(ENV_PROGRESS, None)
+            else:
+                os.environ[ENV_PROGRESS] = old
+        child.close()
+        self.workers[proc] = (parent, None)
+
+    def _hand_out(self, proc: Any) -> None:
+        conn, _ = self.workers[proc]
+        if not self.todo or self.exit_code is not None:
+            self.workers[proc] = (conn, None)
+            return
+        i = self.todo.pop(0)
+        self.callbacks.on_job_start(config=self.configs[i], task_function=self.launcher.task_function)
+        conn.send(pickle.dumps(self.configs[i]))
+        self.workers[proc] = (conn, i)
+
+    def _finish(self, i: int, ret: JobReturn) -> None:
+        self.results[i] = ret
+        self.callbacks.on_job_end(config=self.configs[i], job_return=ret)
+        self.bar.update()
+
+    def run(self) -> list[JobReturn]:
+        from multiprocessing.connection import wait
+
+        from somtorch import interrupt
+
+        interrupt.install()  # SIGINT / SIGTERM here raise Interrupted at once (no deferred region)
+        try:
+            for _ in range(self.plan.workers):
+                self._start()
+            for proc in list(self.workers):
+                self._hand_out(proc)
+            while any(job is not None for _, job in self.workers.values()):
+                busy = {conn: proc for proc, (conn, job) in self.workers.items() if job is not None}
+                ready = wait(list(busy) + [p.sentinel for p in busy.values()])
+                for proc in dict.fromkeys([busy[r] for r in ready if r in busy]
+                                          + [p for p in busy.values() if p.sentinel in ready]):
+                    self._collect(proc)  # its result, or its death
+        except (interrupt.Interrupted, KeyboardInterrupt) as e:
+            done = sum(r is not None for r in self.results)
+            self._stop(signal.SIGTERM)
+            signum = getattr(e, "signum", signal.SIGINT)
+            raise interrupt.Interrupted(signum, f"with {done} of {len(self.configs)} jobs done") from None
+        finally:
+            self._stop(None)
+        if self.exit_code is not None:
+            raise SystemExit(self.exit_code)
+        assert all(r is not None for r in self.results)
+        return [r for r in self.results if r is not None]
+
+    def _collect(self, proc: Any) -> None:
+        conn, i = self.workers[proc]
+        assert i is not None
+        try:
+            kind, value = conn.recv() if conn.poll() else ("died", None)
+        except (EOFError, OSError):
+            kind, value = "died", None
+        if kind == "done":
+            self._finish(i, pickle.loads(value))
+            self._hand_out(proc)
+            return
+        del self.workers[proc]
+        conn.close()
+        if kind == "exit":
+            self.exit_code = self.exit_code or int(value)
+            proc.join(5)
+            return
+        proc.join(5)
+        code = proc.exitcode
+        why = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else f"exit status {code}"
+        ret = JobReturn(overrides=list(self.configs[i].hydra.overrides.task), cfg=self.configs[i],
+                        status=JobStatus.FAILED)
+        ret.return_value = RuntimeError(f"the worker running job #{self.configs[i].hydra.job.num} died ({why}"
+                                        + ("; out of memory?" if code == -signal.SIGKILL else "") + ")")
+        log.error("%s", ret._return_value)
+        self._finish(i, ret)
+        if self.todo and self.exit_code is None:
+            self._start()
+            self._hand_out(list(self.workers)[-1])
+
+    def _stop(self, signum: Optional[int]) -> None:
+        """End every worker: ``signum`` first to the busy ones (they mark their folders), then None
+        down the pipe; whatever is still alive after ``STOP_WAIT_S`` is killed."""
+        for proc, (conn, job) in list(self.workers.items()):
+            if signum is not None and job is not None and proc.is_alive():
+                os.kill(proc.pid, signum)
+            try:
+                conn.send(None)
+            except (OSError, ValueError):
+                pass
+        for proc, (conn, _) in list(self.workers.items()):
+            proc.join(STOP_WAIT_S)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(5)
+            conn.close()
+        self.workers.clear()
