@@ -261,8 +261,14 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
     """A worker: run the composed configs that arrive on ``conn`` until None (or the pipe closes)."""
     from hydra._internal.callbacks import Callbacks
 
-    from hydra.core.plugins import Plugins
+    import threading
 
+    from hydra.core.plugins import Plugins
+    from tqdm.std import tqdm
+
+    # tqdm's default write lock is a multiprocessing semaphore; a worker shows no bars, and a worker
+    # killed while holding one leaves the resource tracker a "leaked semaphore" warning
+    tqdm.set_lock(threading.RLock())
     setup_globals()  # Hydra's resolvers; the task's module registers its own when imported (next)
     task_function = _task_function(*task)
     Singleton._instances = pickle.loads(state)  # as Singleton.set_state, without the resolvers: closures
@@ -271,7 +277,7 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
     while True:
         try:
             msg = conn.recv()
-        except (EOFError, OSError, KeyboardInterrupt):
+        except BaseException:  # noqa: BLE001 - the pipe closed, or a signal between jobs: nothing to clean
             return
         if msg is None:
             return
@@ -383,11 +389,11 @@ class _Pool:
         proc.join(5)
         code = proc.exitcode
         why = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else f"exit status {code}"
-        ret = JobReturn(overrides=list(self.configs[i].hydra.overrides.task), cfg=self.configs[i],
-                        status=JobStatus.FAILED)
+        overrides = list(self.configs[i].hydra.overrides.task)
+        ret = JobReturn(overrides=overrides, cfg=self.configs[i], status=JobStatus.FAILED)
         ret.return_value = RuntimeError(f"the worker running job #{self.configs[i].hydra.job.num} died ({why}"
                                         + ("; out of memory?" if code == -signal.SIGKILL else "") + ")")
-        log.error("%s", ret._return_value)
+        print(f"{ret._return_value}: {' '.join(filter_overrides(overrides))}", file=sys.stderr, flush=True)
         self._finish(i, ret)
         if self.todo and self.exit_code is None:
             self._start()

@@ -132,7 +132,7 @@ def test_bad_study_configs_fail_before_any_work(override, message):
 @pytest.fixture(scope="module")
 def basic_sweep(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("basic")
-    proc = _study(out, *SWEEP)
+    proc = _study(out, *SWEEP, "hydra/launcher=basic")  # the reference: one job after another, in process
     (out / "stderr.txt").write_text(proc.stderr)
     return out / "studies" / "ci"
 
@@ -159,19 +159,21 @@ def test_basic_sweep_writes_one_folder_per_job_and_aggregates(basic_sweep, tmp_p
     assert all(float(t["wall_s_median"]) > 0 for t in timing)
 
 
-@pytest.mark.parametrize("launcher", ["joblib", "ray"])
+@pytest.mark.parametrize("launcher", ["somtorch", "joblib", "ray"])
 def test_launchers_give_identical_results(launcher, basic_sweep, tmp_path):
-    extra = {"joblib": ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"],
+    extra = {"somtorch": ["hydra.launcher.n_jobs=2"],  # the default launcher, two workers whatever the load
+             "joblib": ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"],
              "ray": ["hydra/launcher=ray", "+hydra.launcher.ray.init.num_cpus=2",
                      "+hydra.launcher.ray.init.include_dashboard=false"]}[launcher]
     proc = _study(tmp_path, *SWEEP, *extra, timeout=600)
-    assert {"joblib": "Joblib", "ray": "Ray"}[launcher] in proc.stdout + proc.stderr  # the launcher really ran
+    ran = {"somtorch": "Launching 4 jobs locally, 2 side by side", "joblib": "Joblib", "ray": "Ray"}[launcher]
+    assert ran in proc.stdout + proc.stderr  # the launcher really ran
     other = tmp_path / "studies" / "ci"
     assert _job_runs(other) == _job_runs(basic_sweep)
     aggregate([basic_sweep], tmp_path / "a")
     aggregate([other], tmp_path / "b")
     assert (tmp_path / "a" / "results.csv").read_text() == (tmp_path / "b" / "results.csv").read_text()
-    if launcher == "joblib":  # two jobs side by side: each takes its share of the cores
+    if launcher in ("somtorch", "joblib"):  # two jobs side by side: each takes its share of the cores
         from somtorch.core.threads import auto_threads
 
         threads = {json.loads(m.read_text())["env"]["threads"] for m in _committed(other)}
