@@ -15,6 +15,8 @@ import pytest
 
 from hydra_plugins.somtorch_launcher.launcher import choose_workers, makespan
 
+from .test_interrupt import _wait_for
+
 ROOT = Path(__file__).resolve().parents[2]
 GIB = 1 << 30
 # two jobs of ~100 s of batch-map epochs each on the embedded scene: long enough to be stopped
@@ -66,15 +68,6 @@ def _workers(pid: int) -> list[int]:
         if ppid == pid and b"spawn_main" in cmd:
             out.append(int(d.name))
     return out
-
-
-def _wait_for(pred, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def _group_gone(pgid: int) -> bool:
