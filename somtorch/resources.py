@@ -13,7 +13,8 @@ big tensors each stage holds at its peak:
 * object step: the label maps (still held) plus two strided copies ``(E, H/s, W/s)`` int64 (measured:
   the sampled maps and one more copy of them) and the
   per-map work buffers (``~64 B`` per read pixel);
-* the errors of the trained maps: the top-2 BMUs of the training pixels ``(E, N_train, 2)`` int64
+* the errors of the trained maps (their time counted with the labelling): the top-2 BMUs of the
+  training pixels ``(E, N_train, 2)`` int64
   and their masks (the label maps still held).
 
 The peak is the largest stage plus what every stage holds (features, scene, chunk buffers). It
@@ -25,8 +26,9 @@ an upper bound of the measured peak RSS increase and at most 2.5× it for whole 
 hold more than ~150 MB (labelling- and object-step-bound); the training term over-estimates the
 current batch engine (a shared neighbourhood table) several-fold on large grids.
 
-Times are rough (order of magnitude, per-element costs measured on a 2-core CPU with the native
-kernel): they refuse the absurd (``train.epochs=1000000000``), not the merely long.
+Times are typical, not bounds (per-element costs fitted on one thread of a 2-core CPU with the
+native kernel; a study's jobs come out at 0.6-2x their measured time): they refuse the absurd
+(``train.epochs=1000000000``), not the merely long, and give a sweep its time estimate.
 """
 
 from __future__ import annotations
@@ -44,15 +46,18 @@ GIB = 1 << 30
 _FIXED = 96 << 20  # allocator slack, chunk buffers of the BMU search (16 MiB of scores, a few of them)
 _CHUNK = 1 << 22  # somtorch.core.distance.DEFAULT_CHUNK_ELEMENTS
 _BLOCK = 4096  # somtorch.core.training.BLOCK_STEPS
-# seconds per unit of work (2-core CPU, native kernel; deliberately rounded up)
-_T_BATCH = 3e-10  # per member x training pixel x neuron, one epoch of the batch map
-_T_KK = 2e-9  # per member x neuron², one batch-map update (neighbourhood product)
-_T_ONLINE = 1.5e-8  # per member x step x neuron, online rule
-_T_STEP = 2e-6  # per step, Python / kernel launch overhead
+# seconds per unit of work: one thread of the 2-core development CPU with the native kernel, fitted
+# to the stage timings of the 32 jobs of `somtorch-study +experiment=table1` (two jobs side by side,
+# one thread each; estimate / measured per job: docs/scaling.md §11)
+_T_BATCH = 7e-11  # per member x training pixel x neuron, one epoch of the batch map
+_T_KK = 5e-10  # per member x neuron², one batch-map update (neighbourhood product)
+_T_ONLINE = 1.2e-9  # per member x step x neuron, online rule (members in vector lanes)
+_T_STEP = 1e-7  # per step, the schedule and the kernel's per-step work
 _T_EPOCH = 2.5e-4  # per batch-map epoch: schedule, kernel launches, the update
-_T_LABEL = 8e-10  # per member x pixel x neuron, BMU labelling
-_T_OBJECT = 1e-7  # per member x pixel read by the object step
-_T_MEMBER = 2e-3  # per member: object step bookkeeping, reduction
+_T_LABEL = 3e-10  # per member x pixel x neuron, BMU labelling
+_T_ERRORS = 4.5e-8  # per member x training pixel, quantization and topographic errors (top-2 BMUs)
+_T_OBJECT = 3e-8  # per member x pixel read by the object step
+_T_MEMBER = 4e-3  # per member: object step bookkeeping, reduction
 _T_MINISOM = 3e-5  # per member x step of the MiniSom (pure NumPy) baseline
 _T_SUPERPIXEL = 2e-6  # per pixel of SLIC / Felzenszwalb
 
@@ -133,7 +138,7 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
         train_b += min(e * nt * k, _CHUNK) * 4 * 3  # one chunk of distances (and its argmin)
     per = min(e, max(1, (1 << 27) // max(1, n * k)))  # somtorch.tasks.segmentation.members_per_call
     label_b = e * hw * 8 + per * n * 8 + min(per * n * k, _CHUNK) * 4 * 3
-    label_s = e * n * k * _T_LABEL
+    label_s = e * n * k * _T_LABEL + (e * nt * _T_ERRORS if metrics and method in ("som", "minisom") else 0.0)
     read = math.ceil(height / map_stride) * math.ceil(width / map_stride)
     objects_b = e * hw * 8 + (e * read * 8 * 2 if map_stride > 1 else 0) + read * 64 + hw * 24
     objects_s = e * (read * _T_OBJECT + _T_MEMBER)

@@ -72,7 +72,8 @@ def test_estimate_scales_with_members_and_epochs():
     long = estimate(height=480, width=640, valid=300_000, train=3_000, epochs=10 ** 9)
     assert long.peak_bytes == one.peak_bytes and long.seconds > 1e8 * one.train_s
     online = estimate(height=480, width=640, valid=300_000, train=300_000, mode="online", units=28, members=100)
-    assert 20 < online.seconds < 2000  # the paper preset on every pixel: a minute or so, not seconds or days
+    # the paper preset on every pixel, 100 members: measured 7-18 s a job (table1 study), not minutes or days
+    assert 3 < online.seconds < 60
 
 
 def test_check_refuses_in_one_line():
