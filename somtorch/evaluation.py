@@ -81,17 +81,14 @@ def segment_f1(labels, obj) -> tuple[float, float, float]:
     """Segmentation precision against the object mask: the union of the segments whose pixels are
     mostly object pixels, scored as precision / recall / F1 of the object's valid pixels. Finer
     segmentations follow the object's outline more closely (the paper's Fig. 13)."""
-    ok = labels >= 0
-    lab = labels[ok]
-    o = obj[ok]
-    k = int(lab.max()) + 1 if lab.numel() else 1
-    cnt = torch.bincount(lab, minlength=k)
-    hit = torch.bincount(lab[o], minlength=k)
-    major = hit * 2 > cnt
-    sel = major[lab]
-    tp = int((sel & o).sum())
-    p = tp / max(int(sel.sum()), 1)
-    r = tp / max(int(o.sum()), 1)
+    k = max(int(labels.max()) + 1, 1) if labels.numel() else 1
+    lab = torch.where(labels >= 0, labels, k).reshape(-1)  # invalid pixels counted in bin k, dropped
+    cnt = torch.bincount(lab, minlength=k + 1)[:k]  # pixels per segment
+    hit = torch.bincount(lab, weights=obj.reshape(-1).double(), minlength=k + 1)[:k].long()  # object pixels
+    major = hit * 2 > cnt  # segments mostly on the object
+    tp = int(hit[major].sum())  # object pixels in those segments
+    p = tp / max(int(cnt[major].sum()), 1)
+    r = tp / max(int(hit.sum()), 1)
     return p, r, (2 * p * r / (p + r) if p + r > 0 else 0.0)
 
 
