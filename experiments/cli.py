@@ -153,6 +153,10 @@ def interruptible(out_dir: Path | None) -> Iterator[None]:
         yield
         interrupt.note("")  # a signal between the jobs of a multirun is not "after epoch 9/10"
     except interrupt.Interrupted as e:
+        import signal
+
+        for s in (signal.SIGINT, signal.SIGTERM):  # a second signal (a launcher passing it on) must not
+            signal.signal(s, signal.SIG_IGN)       # cut the clean-up short: the process exits below
         where = f" {e.where}" if e.where else ""
         tail = "partial results not written"
         if out_dir is not None and out_dir.is_dir():
