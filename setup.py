@@ -3,7 +3,8 @@ found and renamed packages, and whose package-data would replace the one here).
 
 somtorch and its subpackages are found; experiments/ is installed as ``somtorch_experiments``
 (``[tool.setuptools.package-dir]``) with the Hydra configs conf/ inside it, each folder of conf/ a
-data-only package.
+data-only package. The Hydra launcher ``hydra_plugins.somtorch_launcher`` (the studies' default) is
+installed under the ``hydra_plugins`` namespace, where Hydra accepts launchers.
 """
 
 from pathlib import Path
