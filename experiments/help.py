@@ -177,6 +177,12 @@ def help_text(name: str, argv0: str | None = None) -> str:
     for prefix, cls in sections:
         lines += ["", f"{prefix}.* ({cls.__name__}):"] + _fields(cls, prefix + ".")
         lines += [f"  {k}={v}" + (f"  — {d}" if d else "") for k, v, d in nested if k.startswith(prefix + ".")]
+    if module == "study":
+        lines += ["", "Sweeps (-m or +experiment=...):",
+                  "  hydra.launcher.n_jobs=None  — jobs side by side (None: as many as cores are free and memory"
+                  " holds; 1: one after another in this process); the default launcher, hydra/launcher=somtorch"
+                  " (docs/scaling.md §11)",
+                  "  hydra/launcher=basic|joblib|ray|slurm  — Hydra's launchers instead (slurm: conf/hydra/launcher/)"]
     lines += ["", "Every key, resolved: --cfg job.  Hydra's own help: --hydra-help.",
               "Docs: README.md, docs/ (validation, scaling, tuned_constants, reliability, results)."]
     return "\n".join(lines)
