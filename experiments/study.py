@@ -138,7 +138,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
     try:
         from tqdm.auto import tqdm
 
-        from .cli import show_progress
+        from .cli import launcher_jobs, show_progress
 
         repeats: list[dict[str, float]] = []
         results, per_run_s = [], None
@@ -191,6 +191,7 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
             "timings_s": repeats[0], "timings_repeats_s": repeats,
             "job": _job_info(),
             "env": {"somtorch": __version__, "torch": torch.__version__, "threads": torch.get_num_threads(),
+                    "jobs_side_by_side": launcher_jobs(),  # its runtimes were measured beside that many jobs
                     "python": platform.python_version(), "host": platform.node(),
                     "native_kernel": os.environ.get("SOMTORCH_NATIVE", "1") != "0"},
             "config": config,

@@ -9,7 +9,8 @@ The default launcher of ``somtorch-study`` (``conf/study.yaml``). Before the fir
    core), else the cores free to this process (its affinity mask and cgroup quota, less what other
    processes kept busy meanwhile), at most the number of jobs, at most what the memory available
    holds at the largest estimated peak (``resources.max_memory_frac`` of it), and 1 when a job
-   runs on a GPU (one device, not one per worker);
+   runs on a GPU (one device, not one per worker) or is timed (``repeats > 1``: the runtime
+   study measures each job alone on every core);
 4. prints one line: the job count, the estimated wall time with that many workers (longest jobs
    first), the largest peak memory, the workers and the threads each job gets (a sweeper that
    launches in batches, as Optuna's, gets it for its first batch only).
@@ -75,9 +76,10 @@ def makespan(seconds: Sequence[float], workers: int) -> float:
 
 
 def choose_workers(n_jobs: Optional[int], jobs: int, *, cores: int, free: Optional[int],
-                   peak_bytes: Optional[int], memory_bytes: Optional[float], gpu: bool) -> int:
-    """The number of jobs to run side by side (see the module docstring)."""
-    if jobs <= 1 or gpu:
+                   peak_bytes: Optional[int], memory_bytes: Optional[float], alone: bool) -> int:
+    """The number of jobs to run side by side (see the module docstring); ``alone``: each job runs
+    by itself (on a GPU, or timed)."""
+    if jobs <= 1 or alone:
         return 1
     if n_jobs is not None and int(n_jobs) != 0:
         n = int(n_jobs)
@@ -148,8 +150,10 @@ class SomtorchLauncher(Launcher):
         frac = float(OmegaConf.select(configs[0], "resources.max_memory_frac", default=0.8) or 0.8)
         memory = available_memory()[0] * frac if peak else None
         gpu = any(not str(OmegaConf.select(c, "device", default="cpu") or "cpu").startswith("cpu") for c in configs)
+        # a timing study (jobs timed several times, `repeats`) measures each job alone on every core
+        timing = any(int(OmegaConf.select(c, "repeats", default=1) or 1) > 1 for c in configs)
         workers = choose_workers(self.n_jobs, len(configs), cores=cores, free=free, peak_bytes=peak,
-                                 memory_bytes=memory, gpu=gpu)
+                                 memory_bytes=memory, alone=gpu or timing)
         threads = max(1, cores // workers)
         order = list(range(len(configs)))
         wall = None

@@ -31,16 +31,16 @@ def test_makespan_hands_the_longest_job_out_first():
 
 
 @pytest.mark.parametrize("kw, want", [
-    (dict(n_jobs=None, jobs=32, free=2, peak_bytes=GIB, memory_bytes=20 * GIB, gpu=False), 2),   # the free cores
-    (dict(n_jobs=None, jobs=32, free=1, peak_bytes=GIB, memory_bytes=20 * GIB, gpu=False), 1),   # one core busy
-    (dict(n_jobs=None, jobs=3, free=16, peak_bytes=GIB, memory_bytes=20 * GIB, gpu=False), 3),   # no more than jobs
-    (dict(n_jobs=None, jobs=32, free=16, peak_bytes=4 * GIB, memory_bytes=10 * GIB, gpu=False), 2),  # memory
-    (dict(n_jobs=None, jobs=32, free=16, peak_bytes=None, memory_bytes=None, gpu=False), 16),    # no estimate
-    (dict(n_jobs=None, jobs=32, free=16, peak_bytes=GIB, memory_bytes=20 * GIB, gpu=True), 1),   # one GPU
-    (dict(n_jobs=4, jobs=32, free=1, peak_bytes=GIB, memory_bytes=GIB, gpu=False), 4),           # as asked
-    (dict(n_jobs=-1, jobs=32, free=1, peak_bytes=None, memory_bytes=None, gpu=False), 16),       # joblib's -1
-    (dict(n_jobs=-2, jobs=32, free=1, peak_bytes=None, memory_bytes=None, gpu=False), 15),
-    (dict(n_jobs=None, jobs=1, free=16, peak_bytes=None, memory_bytes=None, gpu=False), 1),
+    (dict(n_jobs=None, jobs=32, free=2, peak_bytes=GIB, memory_bytes=20 * GIB, alone=False), 2),   # the free cores
+    (dict(n_jobs=None, jobs=32, free=1, peak_bytes=GIB, memory_bytes=20 * GIB, alone=False), 1),   # one core busy
+    (dict(n_jobs=None, jobs=3, free=16, peak_bytes=GIB, memory_bytes=20 * GIB, alone=False), 3),   # no more than jobs
+    (dict(n_jobs=None, jobs=32, free=16, peak_bytes=4 * GIB, memory_bytes=10 * GIB, alone=False), 2),  # memory
+    (dict(n_jobs=None, jobs=32, free=16, peak_bytes=None, memory_bytes=None, alone=False), 16),    # no estimate
+    (dict(n_jobs=None, jobs=32, free=16, peak_bytes=GIB, memory_bytes=20 * GIB, alone=True), 1),  # one GPU, or timed
+    (dict(n_jobs=4, jobs=32, free=1, peak_bytes=GIB, memory_bytes=GIB, alone=False), 4),           # as asked
+    (dict(n_jobs=-1, jobs=32, free=1, peak_bytes=None, memory_bytes=None, alone=False), 16),       # joblib's -1
+    (dict(n_jobs=-2, jobs=32, free=1, peak_bytes=None, memory_bytes=None, alone=False), 15),
+    (dict(n_jobs=None, jobs=1, free=16, peak_bytes=None, memory_bytes=None, alone=False), 1),
 ])
 def test_choose_workers(kw, want):
     assert choose_workers(cores=16, **kw) == want
@@ -159,3 +159,15 @@ def test_a_dead_worker_fails_its_job_and_a_new_worker_takes_the_next(tmp_path):
     for n in (100000, 99999):
         assert not (_job(tmp_path, f"train.epochs={n}") / "metrics.json").exists()
     assert _wait_for(lambda: _group_gone(p.pid), 10), "a worker outlived the sweep"
+
+
+@pytest.mark.slow
+def test_a_timing_sweep_runs_its_jobs_one_at_a_time(tmp_path):
+    # repeats > 1 (the runtime study): each job is timed alone, whatever cores are free
+    p = _sweep(tmp_path, "ensemble=2", "repeats=2", "output.maps=false", "output.tensorboard=false",
+               "train.epochs=2,3")
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+    assert err.splitlines()[0].endswith("; one after another"), err
+    for job in _jobs(tmp_path):
+        assert json.loads((job / "metrics.json").read_text())["env"]["jobs_side_by_side"] == 1

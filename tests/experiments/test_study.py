@@ -178,6 +178,8 @@ def test_launchers_give_identical_results(launcher, basic_sweep, tmp_path):
 
         threads = {json.loads(m.read_text())["env"]["threads"] for m in _committed(other)}
         assert threads == {auto_threads(jobs=2)}, threads
+        side = {json.loads(m.read_text())["env"]["jobs_side_by_side"] for m in _committed(other)}
+        assert side == {2}, side
 
 
 def _committed(sweep: Path) -> list[Path]:
