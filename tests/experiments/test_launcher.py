@@ -22,6 +22,7 @@ GIB = 1 << 30
 # two jobs of ~100 s of batch-map epochs each on the embedded scene: long enough to be stopped
 LONG = ["ensemble=20", "train.epochs=100000", "output.tensorboard=false", "output.maps=false", "seed=0,1",
         "hydra.launcher.n_jobs=2"]
+SMALL = ["ensemble=2", "output.maps=false", "output.tensorboard=false"]  # a job of a second or two
 
 
 def test_makespan_hands_the_longest_job_out_first():
@@ -52,6 +53,13 @@ def _sweep(tmp_path: Path, *overrides: str, **kw) -> subprocess.Popen:
     env.pop("HYDRA_FULL_ERROR", None)
     return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, **kw)
+
+
+def _finished(tmp_path: Path, *overrides: str) -> tuple[int, str]:
+    """Run a sweep to its end: (exit status, stderr)."""
+    p = _sweep(tmp_path, *overrides)
+    _, err = p.communicate(timeout=300)
+    return p.returncode, err
 
 
 def _workers(pid: int) -> list[int]:
@@ -119,10 +127,8 @@ def test_a_signal_stops_every_worker_and_marks_their_folders(tmp_path, sig, code
 @pytest.mark.slow
 def test_a_bad_job_ends_the_sweep_with_its_status_after_the_good_one(tmp_path):
     # train.epochs=0 fails the job's config check: one line, status 2; the other job completes
-    p = _sweep(tmp_path, "ensemble=2", "output.maps=false", "output.tensorboard=false", "train.epochs=3,0",
-               "hydra.launcher.n_jobs=2")
-    _, err = p.communicate(timeout=300)
-    assert p.returncode == 2, err
+    code, err = _finished(tmp_path, *SMALL, "train.epochs=3,0", "hydra.launcher.n_jobs=2")
+    assert code == 2, err
     assert "Traceback" not in err
     assert sum(line.startswith("error: ") for line in err.splitlines()) == 1, err
     good, bad = (_job(tmp_path, f"train.epochs={n}") for n in (3, 0))
@@ -134,8 +140,7 @@ def test_a_bad_job_ends_the_sweep_with_its_status_after_the_good_one(tmp_path):
 def test_a_dead_worker_fails_its_job_and_a_new_worker_takes_the_next(tmp_path):
     # two long jobs start first (longest first); one worker is killed: its job fails, a new worker
     # runs the short job; then the sweep is stopped (the other long job would take minutes)
-    p = _sweep(tmp_path, "ensemble=20", "output.maps=false", "output.tensorboard=false",
-               "train.epochs=100000,99999,2", "hydra.launcher.n_jobs=2")
+    p = _sweep(tmp_path, "ensemble=20", *SMALL[1:], "train.epochs=100000,99999,2", "hydra.launcher.n_jobs=2")
     sweep = tmp_path / "studies" / "l"
     try:
         started = lambda: sweep.is_dir() and len([j for j in _jobs(tmp_path) if any(j.glob(".partial-*"))]) == 2  # noqa: E731
@@ -164,10 +169,8 @@ def test_a_dead_worker_fails_its_job_and_a_new_worker_takes_the_next(tmp_path):
 @pytest.mark.slow
 def test_a_timing_sweep_runs_its_jobs_one_at_a_time(tmp_path):
     # repeats > 1 (the runtime study): each job is timed alone, whatever cores are free
-    p = _sweep(tmp_path, "ensemble=2", "repeats=2", "output.maps=false", "output.tensorboard=false",
-               "train.epochs=2,3")
-    _, err = p.communicate(timeout=300)
-    assert p.returncode == 0, err
+    code, err = _finished(tmp_path, *SMALL, "repeats=2", "train.epochs=2,3")
+    assert code == 0, err
     assert err.splitlines()[0].endswith("; one after another"), err
     for job in _jobs(tmp_path):
         assert json.loads((job / "metrics.json").read_text())["env"]["jobs_side_by_side"] == 1
