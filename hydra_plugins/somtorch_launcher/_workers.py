@@ -7,10 +7,12 @@ one at a time, results, exits and deaths collected in the launching process.
 from __future__ import annotations
 
 import importlib
+import multiprocessing
 import os
 import pickle
 import signal
 import sys
+import threading
 from typing import Any, Optional
 
 from hydra.core.hydra_config import HydraConfig
@@ -51,9 +53,6 @@ def _portable(ret: JobReturn) -> JobReturn:
 def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> None:
     """A worker: run the composed configs that arrive on ``conn`` until None (or the pipe closes)."""
     from hydra._internal.callbacks import Callbacks
-
-    import threading
-
     from hydra.core.plugins import Plugins
     from tqdm.std import tqdm
 
@@ -95,7 +94,7 @@ class Pool:
         self.callbacks = launcher.hydra_context.callbacks
         self.args = (_task_reference(launcher.task_function), pickle.dumps(launcher.hydra_context.config_loader),
                      pickle.dumps(Singleton.get_state()["instances"]))
-        self.ctx = __import__("multiprocessing").get_context("spawn")
+        self.ctx = multiprocessing.get_context("spawn")
         self.workers: dict[Any, tuple[Any, Optional[int]]] = {}  # process -> (pipe, job position or None)
         self.results: list[Optional[JobReturn]] = [None] * len(configs)
         self.todo = list(plan.order)
