@@ -35,7 +35,8 @@ def sweep_jobs(config: DictConfig) -> list[list[str]]:
     return [job for batch in BasicSweeper.split_arguments(parsed, None) for job in batch]
 
 
-_scenes: dict[str, Any] = {}  # scenes read for estimates, by data config (a sweep reads each once)
+_scenes: dict[str, Any] = {}  # the last scenes read for estimates, by data config (at most SCENES_KEPT)
+SCENES_KEPT = 4
 # a study job's own work beside the pipeline: reading the scene, scoring the runs, the pictures and
 # files (measured 1.2-4.5 s a job on the table1 study, median ~1.5 s, one thread)
 JOB_S = 1.5
@@ -59,6 +60,8 @@ def job_estimate(composed: DictConfig) -> tuple[float, int]:
             from somtorch.disparity.resize import resize_scene
 
             scene = resize_scene(scene, int(resize[0]), int(resize[1]))
+        if len(_scenes) >= SCENES_KEPT:  # a big map is not held for the whole sweep
+            _scenes.pop(next(iter(_scenes)))
         _scenes[key] = scene
     separate = getattr(cfg, "execution", "ensemble") == "separate" and cfg.runs > 1
     repeats = getattr(cfg, "repeats", 1)
