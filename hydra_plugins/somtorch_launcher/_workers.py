@@ -7,20 +7,24 @@ one at a time, results, exits and deaths collected in the launching process.
 from __future__ import annotations
 
 import importlib
+import logging
+import math
 import multiprocessing
 import os
 import pickle
 import signal
 import sys
 import threading
+from collections.abc import Callable, Sequence
 from typing import Any, Optional
 
 from hydra.core.hydra_config import HydraConfig
 from hydra.core.singleton import Singleton
 from hydra.core.utils import JobReturn, JobStatus, filter_overrides, run_job, setup_globals
 from hydra.types import HydraContext, TaskFunction
-from omegaconf import DictConfig
+from omegaconf import DictConfig, open_dict
 
+log = logging.getLogger("hydra_plugins.somtorch_launcher.launcher")
 ENV_PROGRESS = "SOMTORCH_PROGRESS"  # "0" in the workers: their bars would overwrite each other
 STOP_WAIT_S = 20.0  # how long stopped workers get to mark their folders before they are killed
 
@@ -50,6 +54,53 @@ def _portable(ret: JobReturn) -> JobReturn:
     return ret
 
 
+def compose(loader: Any, master: DictConfig, idx: int, overrides: Sequence[str]) -> DictConfig:
+    """Job ``idx``'s config, composed as Hydra's sweepers compose it."""
+    cfg = loader.load_sweep_config(master, list(overrides))
+    with open_dict(cfg):
+        cfg.hydra.job.id = idx
+        cfg.hydra.job.num = idx
+    return cfg
+
+
+def locate(path: Optional[str]) -> Optional[Callable[[DictConfig], Any]]:
+    """The estimate function named by its dotted ``path`` (None: no estimate, or it cannot be imported)."""
+    if not path:
+        return None
+    module, _, name = path.rpartition(".")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as e:
+        log.warning("no time estimate: %s cannot be imported (%s)", path, e)
+        return None
+
+
+def estimate(fn: Optional[Callable[[DictConfig], Any]], cfg: DictConfig) -> Optional[tuple[float, int]]:
+    """``fn``'s (seconds, peak bytes) for one composed job, or None (an estimate never stops a sweep)."""
+    if fn is None:
+        return None
+    job = cfg.copy()
+    with open_dict(job):
+        del job["hydra"]  # its ${hydra:...} values need a running job
+    try:
+        est = fn(job)
+    except Exception as e:  # noqa: BLE001 - the job fails with its own message when its turn comes
+        log.debug("no estimate for job %s: %s", cfg.hydra.job.num, e)
+        return None
+    return None if est is None else (float(est[0]), int(est[1]))
+
+
+def plan_jobs(loader: Any, master: DictConfig, items: Sequence[tuple[int, Sequence[str]]],
+              estimate_path: Optional[str]) -> list[tuple[int, DictConfig, Optional[tuple[float, int]]]]:
+    """Compose and estimate the jobs ``items`` = [(idx, overrides)]: [(idx, config, estimate)]."""
+    fn = locate(estimate_path)
+    out = []
+    for idx, overrides in items:
+        cfg = compose(loader, master, idx, overrides)
+        out.append((idx, cfg, estimate(fn, cfg)))
+    return out
+
+
 def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> None:
     """A worker: run the composed configs that arrive on ``conn`` until None (or the pipe closes)."""
     from hydra._internal.callbacks import Callbacks
@@ -71,7 +122,17 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
             return
         if msg is None:
             return
-        config = pickle.loads(msg)
+        kind, payload = msg
+        if kind == "plan":  # compose and estimate a share of the sweep's jobs
+            master, estimate_path, items = pickle.loads(payload)
+            try:
+                planned = plan_jobs(context.config_loader, master, items, estimate_path)
+            except BaseException:  # noqa: BLE001 - the launcher composes these itself and says why
+                conn.send(("unplanned", None))
+                continue
+            conn.send(("planned", pickle.dumps(planned)))
+            continue
+        config = pickle.loads(payload)
         HydraConfig.instance().set_config(config)
         try:
             ret = run_job(hydra_context=context, task_function=task_function, config=config,
@@ -86,21 +147,26 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
 
 
 class Pool:
-    """The workers of one launch: one pipe each, jobs handed out one at a time."""
+    """The workers of one launch, one pipe each: first they compose and estimate shares of the
+    sweep's jobs (:meth:`plan`), then they run the jobs, handed out one at a time (:meth:`run`)."""
 
-    def __init__(self, launcher: Any, configs: list[DictConfig], plan: Any, bar: Any) -> None:
+    def __init__(self, launcher: Any, workers: int) -> None:
         assert launcher.hydra_context is not None and launcher.task_function is not None
-        self.launcher, self.configs, self.plan, self.bar = launcher, configs, plan, bar
+        self.launcher = launcher
         self.callbacks = launcher.hydra_context.callbacks
         self.args = (_task_reference(launcher.task_function), pickle.dumps(launcher.hydra_context.config_loader),
                      pickle.dumps(Singleton.get_state()["instances"]))
         self.ctx = multiprocessing.get_context("spawn")
         self.workers: dict[Any, tuple[Any, Optional[int]]] = {}  # process -> (pipe, job position or None)
-        self.results: list[Optional[JobReturn]] = [None] * len(configs)
-        self.todo = list(plan.order)
+        self.configs: list[DictConfig] = []
+        self.results: list[Optional[JobReturn]] = []
+        self.todo: list[int] = []
         self.exit_code: Optional[int] = None
+        self.bar: Any = None
+        for _ in range(workers):
+            self._start()
 
-    def _start(self) -> None:
+    def _start(self) -> Any:
         parent, child = self.ctx.Pipe()
         proc = self.ctx.Process(target=_serve, args=(child, *self.args), daemon=True)
         old = os.environ.get(ENV_PROGRESS)
@@ -114,30 +180,74 @@ class Pool:
                 os.environ[ENV_PROGRESS] = old
         child.close()
         self.workers[proc] = (parent, None)
+        return proc
 
-    def _hand_out(self, proc: Any) -> None:
-        conn, _ = self.workers[proc]
-        if not self.todo or self.exit_code is not None:
-            self.workers[proc] = (conn, None)
-            return
-        i = self.todo.pop(0)
-        self.callbacks.on_job_start(config=self.configs[i], task_function=self.launcher.task_function)
-        conn.send(pickle.dumps(self.configs[i]))
-        self.workers[proc] = (conn, i)
+    # ------------------------------------------------------------------ planning
+    def plan(self, items: list[tuple[int, Sequence[str]]], master: DictConfig, estimate_path: Optional[str]
+             ) -> list[tuple[int, DictConfig, Optional[tuple[float, int]]]]:
+        """[(idx, config, estimate)] of ``items`` = [(idx, overrides)], in their order, composed by the
+        workers in contiguous shares (consecutive jobs usually share a scene, which each reads once);
+        a share whose worker fails or dies is composed here."""
+        from multiprocessing.connection import wait
 
-    def _finish(self, i: int, ret: JobReturn) -> None:
-        self.results[i] = ret
-        self.callbacks.on_job_end(config=self.configs[i], job_return=ret)
-        self.bar.update()
+        from somtorch import interrupt
 
-    def run(self) -> list[JobReturn]:
+        interrupt.install()
+        size = max(1, math.ceil(len(items) / (3 * max(1, len(self.workers)))))
+        shares = [items[i:i + size] for i in range(0, len(items), size)]
+        pending = list(range(len(shares)))
+        out: dict[int, list] = {}
+        busy: dict[Any, int] = {}  # pipe -> share
+        procs = {conn: proc for proc, (conn, _) in self.workers.items()}
+        try:
+            idle = list(procs)
+            while pending or busy:
+                while pending and idle:
+                    conn = idle.pop()
+                    share = pending.pop(0)
+                    conn.send(("plan", pickle.dumps((master, estimate_path, shares[share]))))
+                    busy[conn] = share
+                ready = wait(list(busy) + [procs[c].sentinel for c in busy])
+                for conn in list(busy):
+                    proc = procs[conn]
+                    if conn not in ready and proc.sentinel not in ready:
+                        continue
+                    share = busy.pop(conn)
+                    try:
+                        kind, value = conn.recv() if conn.poll() else ("died", None)
+                    except (EOFError, OSError):
+                        kind, value = "died", None
+                    if kind == "planned":
+                        out[share] = pickle.loads(value)
+                        idle.append(conn)
+                        continue
+                    loader = self.launcher.hydra_context.config_loader
+                    out[share] = plan_jobs(loader, master, shares[share], estimate_path)  # here, with its error
+                    if kind == "unplanned":
+                        idle.append(conn)
+                    else:  # a worker that died planning is not replaced until the jobs need it
+                        del self.workers[proc]
+                        conn.close()
+        except (interrupt.Interrupted, KeyboardInterrupt) as e:
+            self.close()
+            raise interrupt.Interrupted(getattr(e, "signum", signal.SIGINT), "while composing the jobs") from None
+        return [row for share in range(len(shares)) for row in out[share]]
+
+    # ------------------------------------------------------------------ running
+    def run(self, configs: list[DictConfig], plan: Any, bar: Any) -> list[JobReturn]:
+        """Run ``configs`` in ``plan.order`` on ``plan.workers`` workers; their JobReturns in job order."""
         from multiprocessing.connection import wait
 
         from somtorch import interrupt
 
         interrupt.install()  # SIGINT / SIGTERM here raise Interrupted at once (no deferred region)
+        self.configs, self.bar = configs, bar
+        self.results = [None] * len(configs)
+        self.todo = list(plan.order)
         try:
-            for _ in range(self.plan.workers):
+            for proc in list(self.workers)[plan.workers:]:  # planning needed more hands than the jobs can use
+                self._retire(proc)
+            while len(self.workers) < plan.workers:
                 self._start()
             for proc in list(self.workers):
                 self._hand_out(proc)
@@ -158,6 +268,36 @@ class Pool:
             raise SystemExit(self.exit_code)
         assert all(r is not None for r in self.results)
         return [r for r in self.results if r is not None]
+
+    def close(self) -> None:
+        """End the workers (idle ones: at once)."""
+        self._stop(None)
+
+    def _retire(self, proc: Any) -> None:
+        conn, _ = self.workers.pop(proc)
+        try:
+            conn.send(None)
+        except (OSError, ValueError):
+            pass
+        proc.join(STOP_WAIT_S)
+        if proc.is_alive():
+            proc.kill()
+        conn.close()
+
+    def _hand_out(self, proc: Any) -> None:
+        conn, _ = self.workers[proc]
+        if not self.todo or self.exit_code is not None:
+            self.workers[proc] = (conn, None)
+            return
+        i = self.todo.pop(0)
+        self.callbacks.on_job_start(config=self.configs[i], task_function=self.launcher.task_function)
+        conn.send(("run", pickle.dumps(self.configs[i])))
+        self.workers[proc] = (conn, i)
+
+    def _finish(self, i: int, ret: JobReturn) -> None:
+        self.results[i] = ret
+        self.callbacks.on_job_end(config=self.configs[i], job_return=ret)
+        self.bar.update()
 
     def _collect(self, proc: Any) -> None:
         conn, i = self.workers[proc]
@@ -186,8 +326,7 @@ class Pool:
         print(f"{ret._return_value}: {' '.join(filter_overrides(overrides))}", file=sys.stderr, flush=True)
         self._finish(i, ret)
         if self.todo and self.exit_code is None:
-            self._start()
-            self._hand_out(list(self.workers)[-1])
+            self._hand_out(self._start())
 
     def _stop(self, signum: Optional[int]) -> None:
         """End every worker: ``signum`` first to the busy ones (they mark their folders), then None

@@ -2,15 +2,18 @@
 
 The default launcher of ``somtorch-study`` (``conf/study.yaml``). Before the first job it
 
-1. composes every job's config (once, here: the workers receive them composed);
-2. asks ``estimate`` (a function named by its dotted path, called with a job's composed config
-   without its ``hydra`` node; it returns ``(seconds, peak_bytes)`` or None) about each job;
-3. picks the number of workers: ``n_jobs`` if given (negative counts as joblib does: −1 = every
-   core), else the cores free to this process (its affinity mask and cgroup quota, less what other
-   processes kept busy meanwhile), at most the number of jobs, at most what the memory available
-   holds at the largest estimated peak (``resources.max_memory_frac`` of it), and 1 when a job
-   runs on a GPU (one device, not one per worker) or is timed (``repeats > 1``: the runtime
-   study measures each job alone on every core);
+1. measures the cores free to this process (its affinity mask and cgroup quota, less what other
+   processes keep busy over 60 ms) and starts that many spawned workers (``n_jobs`` if given;
+   negative counts as joblib does: −1 = every core; at most the number of jobs);
+2. has them compose every job's config (contiguous shares, as Hydra's sweepers compose them; a
+   share a worker cannot compose is composed here, with its error) and ask ``estimate`` (a
+   function named by its dotted path, called with a job's composed config without its ``hydra``
+   node; it returns ``(seconds, peak_bytes)`` or None) about each job: ~90 ms of Hydra a job,
+   spread over the workers while they are needed for nothing else;
+3. keeps as many workers as run side by side: at most what the memory available holds at the
+   largest estimated peak (``resources.max_memory_frac`` of it), and 1 when a job runs on a GPU
+   (one device, not one per worker) or is timed (``repeats > 1``: the runtime study measures each
+   job alone on every core);
 4. prints one line: the job count, the estimated wall time with that many workers (longest jobs
    first), the largest peak memory, the workers and the threads each job gets (a sweeper that
    launches in batches, as Optuna's, gets it for its first batch only).
@@ -34,11 +37,10 @@ takes the next job.
 from __future__ import annotations
 
 import heapq
-import importlib
 import logging
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NamedTuple, Optional
 
@@ -47,7 +49,7 @@ from hydra.plugins.launcher import Launcher
 from hydra.types import HydraContext, TaskFunction
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from ._workers import ENV_PROGRESS, Pool
+from ._workers import ENV_PROGRESS, Pool, plan_jobs
 
 log = logging.getLogger(__name__)
 
@@ -110,35 +112,6 @@ class SomtorchLauncher(Launcher):
         self.config, self.hydra_context, self.task_function = config, hydra_context, task_function
 
     # ------------------------------------------------------------------ planning
-    def _compose(self, idx: int, overrides: Sequence[str]) -> DictConfig:
-        assert self.hydra_context is not None and self.config is not None
-        cfg = self.hydra_context.config_loader.load_sweep_config(self.config, list(overrides))
-        with open_dict(cfg):
-            cfg.hydra.job.id = idx
-            cfg.hydra.job.num = idx
-        return cfg
-
-    def _estimates(self, configs: list[DictConfig]) -> list[Optional[tuple[float, int]]]:
-        if not self.estimate:
-            return [None] * len(configs)
-        try:
-            fn: Callable[[DictConfig], Any] = _locate(self.estimate)
-        except (ImportError, AttributeError) as e:
-            log.warning("no time estimate: %s cannot be imported (%s)", self.estimate, e)
-            return [None] * len(configs)
-        out: list[Optional[tuple[float, int]]] = []
-        for cfg in configs:
-            job = cfg.copy()
-            with open_dict(job):
-                del job["hydra"]  # its ${hydra:...} values need a running job
-            try:
-                est = fn(job)
-            except Exception as e:  # noqa: BLE001 - an estimate never stops a sweep; the job fails on its own
-                log.debug("no estimate for job %s: %s", cfg.hydra.job.num, e)
-                est = None
-            out.append(None if est is None else (float(est[0]), int(est[1])))
-        return out
-
     def _plan(self, configs: list[DictConfig], estimates: list[Optional[tuple[float, int]]],
               free: Optional[int]) -> Plan:
         from somtorch.core.threads import available_cores
@@ -183,33 +156,47 @@ class SomtorchLauncher(Launcher):
 
     # ------------------------------------------------------------------ running
     def launch(self, job_overrides: Sequence[Sequence[str]], initial_job_idx: int) -> Sequence[JobReturn]:
-        from somtorch.core.threads import FreeCoreMonitor, available_cores
+        from somtorch.core.threads import available_cores
 
         setup_globals()
         assert self.config is not None and self.hydra_context is not None and self.task_function is not None
         configure_log(self.config.hydra.hydra_logging, self.config.hydra.verbose)
         Path(str(self.config.hydra.sweep.dir)).mkdir(parents=True, exist_ok=True)
-        monitor = FreeCoreMonitor(window_s=0.05)
-        monitor.free(available_cores())  # first sample; the second after composing and estimating
-        configs = [self._compose(initial_job_idx + i, ov) for i, ov in enumerate(job_overrides)]
-        plan = self._plan(configs, self._estimates(configs), monitor.free(available_cores()))
-        for cfg in configs:
-            with open_dict(cfg):
-                cfg.hydra.launcher.n_jobs = plan.workers  # the job's thread share (experiments.cli.launcher_jobs)
-        if self.launches == 0:  # the first batch says what the sweep will cost; later ones do not repeat it
-            self._announce(plan, len(configs))
-        self.launches += 1
-        log.info("Launching %d jobs locally%s", len(configs),
-                 f", {plan.workers} side by side" if plan.workers > 1 else "")
-        for i, ov in enumerate(job_overrides):
-            log.info("\t#%d : %s", initial_job_idx + i, " ".join(filter_overrides(ov)))
-        bar = _bar(len(configs), self.config)
+        items = [(initial_job_idx + i, list(ov)) for i, ov in enumerate(job_overrides)]
+        cores = available_cores()
+        free = _free_cores(cores)  # before any worker of ours runs
+        # as many workers as the jobs could use; they compose and estimate the jobs, then run them
+        most = choose_workers(self.n_jobs, len(items), cores=cores, free=free, peak_bytes=None,
+                              memory_bytes=None, alone=False)
+        pool = Pool(self, most) if most > 1 else None
         try:
-            if plan.workers == 1:
-                return self._in_process(configs, bar)
-            return Pool(self, configs, plan, bar).run()
+            planned = (pool.plan(items, self.config, self.estimate) if pool is not None
+                       else plan_jobs(self.hydra_context.config_loader, self.config, items, self.estimate))
+            configs = [cfg for _, cfg, _ in planned]
+            plan = self._plan(configs, [est for _, _, est in planned], free)
+            for cfg in configs:
+                with open_dict(cfg):
+                    cfg.hydra.launcher.n_jobs = plan.workers  # the job's thread share (experiments.cli.launcher_jobs)
+            if self.launches == 0:  # the first batch says what the sweep will cost; later ones do not repeat it
+                self._announce(plan, len(configs))
+            self.launches += 1
+            log.info("Launching %d jobs locally%s", len(configs),
+                     f", {plan.workers} side by side" if plan.workers > 1 else "")
+            for idx, ov in items:
+                log.info("\t#%d : %s", idx, " ".join(filter_overrides(ov)))
+            bar = _bar(len(configs), self.config)
+            try:
+                if plan.workers == 1:
+                    if pool is not None:
+                        pool.close()
+                    return self._in_process(configs, bar)
+                assert pool is not None  # plan.workers <= most
+                return pool.run(configs, plan, bar)
+            finally:
+                bar.close()
         finally:
-            bar.close()
+            if pool is not None:
+                pool.close()
 
     def _in_process(self, configs: list[DictConfig], bar: Any) -> list[JobReturn]:
         assert self.config is not None and self.hydra_context is not None and self.task_function is not None
@@ -231,6 +218,13 @@ def _bar(total: int, config: DictConfig) -> Any:
     return tqdm(total=total, desc=f"{name} jobs", unit="job", disable=not shown, position=0, dynamic_ncols=True)
 
 
-def _locate(path: str) -> Any:
-    module, _, name = path.rpartition(".")
-    return getattr(importlib.import_module(module), name)
+def _free_cores(cores: int, window_s: float = 0.05) -> Optional[int]:
+    """Cores other processes leave free, measured over ``window_s`` (None off Linux)."""
+    import time
+
+    from somtorch.core.threads import FreeCoreMonitor
+
+    monitor = FreeCoreMonitor(window_s=window_s)
+    monitor.free(cores)
+    time.sleep(window_s * 1.2)  # a full window: the monitor re-samples only after one
+    return monitor.free(cores)
