@@ -207,6 +207,11 @@ class Pool:
                     share = pending.pop(0)
                     conn.send(("plan", pickle.dumps((master, estimate_path, shares[share]))))
                     busy[conn] = share
+                if not busy:  # every worker died: the rest is composed here
+                    loader = self.launcher.hydra_context.config_loader
+                    for share in pending:
+                        out[share] = plan_jobs(loader, master, shares[share], estimate_path)
+                    break
                 ready = wait(list(busy) + [procs[c].sentinel for c in busy])
                 for conn in list(busy):
                     proc = procs[conn]
