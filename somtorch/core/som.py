@@ -32,7 +32,8 @@ from .losses import soft_assign, som_energy
 from .metrics import quantization_error, topographic_error, umatrix
 from .neighborhood import NEIGHBORHOODS, NeighborhoodFn
 from .threads import contended
-from .training import Callback, Order, Schedules, run
+from .order import Order, Schedules
+from .training import Callback, run
 
 _T, _S = TrainConfig, SOMConfig  # the defaults of fit (class attributes), declared once in somtorch.config
 

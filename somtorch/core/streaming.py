@@ -31,7 +31,8 @@ from ..config import TrainConfig
 from .decay import DECAYS
 from .grid import default_sigma
 from .neighborhood import NEIGHBORHOODS
-from .training import Chunks, Schedules, run
+from .order import Schedules
+from .training import Chunks, run
 
 __all__ = ["Source", "chunk_rows", "chunk_source", "fit_batch_chunked"]
 

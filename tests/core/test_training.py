@@ -8,8 +8,9 @@ import torch
 from somtorch import SOM
 from somtorch.core.grid import grid_sqdist
 from somtorch.core.neighborhood import bubble, gaussian
-from somtorch.core import training
-from somtorch.core.training import Order, _blocks, accumulate, batch_target, online_block
+from somtorch.core import order
+from somtorch.core.order import Order
+from somtorch.core.training import _blocks, accumulate, batch_target, online_block
 
 ROWS, COLS, D = 3, 4, 2
 K = ROWS * COLS
@@ -120,8 +121,8 @@ def test_random_order_is_a_fresh_permutation_per_epoch_and_member():
 
 def test_random_order_is_the_same_drawn_on_threads_and_in_int32(monkeypatch):
     # the (E, N) table of permutations: int32 rows on worker threads = torch.randperm per generator
-    monkeypatch.setattr(training, "PERM_THREAD_ELEMENTS", 1)
-    monkeypatch.setattr(training, "kernel_threads", lambda: 2)
+    monkeypatch.setattr(order, "PERM_THREAD_ELEMENTS", 1)
+    monkeypatch.setattr(order, "kernel_threads", lambda: 2)
     gens = [torch.Generator().manual_seed(s) for s in range(5)]
     idx = Order("random", 1000, 5, gens, torch.device("cpu")).indices(0, 1000)
     want = torch.stack([torch.randperm(1000, generator=torch.Generator().manual_seed(s)) for s in range(5)])
