@@ -22,6 +22,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.core.singleton import Singleton
 from hydra.core.utils import JobReturn, JobStatus, filter_overrides, run_job, setup_globals
 from hydra.types import HydraContext, TaskFunction
+from hydra.utils import get_method
 from omegaconf import DictConfig, open_dict
 
 log = logging.getLogger("hydra_plugins.somtorch_launcher.launcher")
@@ -67,10 +68,9 @@ def locate(path: Optional[str]) -> Optional[Callable[[DictConfig], Any]]:
     """The estimate function named by its dotted ``path`` (None: no estimate, or it cannot be imported)."""
     if not path:
         return None
-    module, _, name = path.rpartition(".")
     try:
-        return getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError) as e:
+        return get_method(path)
+    except (ImportError, ValueError) as e:
         log.warning("no time estimate: %s cannot be imported (%s)", path, e)
         return None
 
@@ -146,6 +146,14 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
         conn.send(("done", pickle.dumps(_portable(ret))))
 
 
+def _reply(conn: Any) -> tuple[str, Any]:
+    """What a worker whose pipe or process became ready sent, or ``("died", None)``."""
+    try:
+        return conn.recv() if conn.poll() else ("died", None)
+    except (EOFError, OSError):
+        return "died", None
+
+
 class Pool:
     """The workers of one launch, one pipe each: first they compose and estimate shares of the
     sweep's jobs (:meth:`plan`), then they run the jobs, handed out one at a time (:meth:`run`)."""
@@ -218,10 +226,7 @@ class Pool:
                     if conn not in ready and proc.sentinel not in ready:
                         continue
                     share = busy.pop(conn)
-                    try:
-                        kind, value = conn.recv() if conn.poll() else ("died", None)
-                    except (EOFError, OSError):
-                        kind, value = "died", None
+                    kind, value = _reply(conn)
                     if kind == "planned":
                         out[share] = pickle.loads(value)
                         idle.append(conn)
@@ -307,10 +312,7 @@ class Pool:
     def _collect(self, proc: Any) -> None:
         conn, i = self.workers[proc]
         assert i is not None
-        try:
-            kind, value = conn.recv() if conn.poll() else ("died", None)
-        except (EOFError, OSError):
-            kind, value = "died", None
+        kind, value = _reply(conn)
         if kind == "done":
             self._finish(i, pickle.loads(value))
             self._hand_out(proc)
