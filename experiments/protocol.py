@@ -11,9 +11,13 @@ The rule (``decide``), for a candidate against the defaults on the same frames a
   interval excluding zero, the all-objects reading does not drop (its real macro difference has a
   lower bound above ``-ni_margin``), and no dataset, real or synthetic, loses more than
   ``loss_margin`` of its useful-hit rate in either reading;
-* where not one real frame changes (in either reading), the real data cannot tell, and the same
-  test runs over every dataset instead (the macro average over all, synthetic included): a failure
-  class the real datasets do not hold is judged by the datasets that do;
+* **or** (the second path, ``path="all"``) when the candidate is *non-inferior on the real data*
+  (the real macro difference's lower bound above ``-ni_margin`` in both readings) and *superior over
+  every dataset* (the macro average over all datasets, synthetic included, of the paired main-object
+  difference has its interval above zero, and its all-objects reading's lower bound stays above
+  ``-ni_margin``), with the same per-dataset loss bound. A change the wider evidence supports and a
+  small real corpus cannot refute is adopted; where not one real frame changes this is the old
+  "evidence decides" clause (the real difference is then exactly zero);
 * a knob whose *neutral* value (the check switched off) passes the non-inferiority test —
   lower bound of the real macro difference above ``-ni_margin`` in both readings and no dataset
   losing more than ``loss_margin`` — is not needed and is **removed**.
@@ -116,11 +120,12 @@ class Decision:
     useful_all: tuple[float, float, float]  # over every dataset (synthetic included): evidence
     worst: tuple[str, float]  # the dataset of the largest loss (either reading) and that loss
     reasons: list[str]
+    path: str = ""  # "real": adopted by the real macro gain; "all": non-inferior on real, superior on all
 
     def as_dict(self) -> dict[str, Any]:
         return {"adopt": self.adopt, "non_inferior": self.non_inferior, "useful": self.useful,
                 "all_objects": self.all_objects, "useful_all": self.useful_all, "worst": self.worst,
-                "reasons": self.reasons}
+                "reasons": self.reasons, "path": self.path}
 
 
 def decide(table: FrameTable, cand_useful: np.ndarray, base_useful: np.ndarray, cand_all: np.ndarray,
@@ -142,16 +147,12 @@ def decide(table: FrameTable, cand_useful: np.ndarray, base_useful: np.ndarray, 
     if worst[1] < -loss_margin:
         reasons.append(f"{worst[0]} loses {-worst[1]:.3f} > {loss_margin}")
     ni = useful[1] > -ni_margin and allobj[1] > -ni_margin and worst[1] >= -loss_margin
-    # where the real frames cannot tell (not one of them changes, in either reading), the evidence
-    # decides: a class the real datasets do not hold (a floor seen from above) is judged on the
-    # synthetic datasets that do, by the same interval over all datasets
-    real = np.array(table.real, dtype=bool)
-    silent = bool(real.any()) and not (du[real].any() or da[real].any())
-    if silent and reasons and reasons[0].startswith("real macro") and useful_all[1] > 0 \
-            and worst[1] >= -loss_margin and table.macro(da, real_only=False)[1] > -ni_margin:
-        reasons = []
-    return Decision(adopt=not reasons, non_inferior=ni, useful=useful, all_objects=allobj,
-                    useful_all=useful_all, worst=worst, reasons=reasons)
+    path = "real" if not reasons else ""
+    if not path and ni and useful_all[1] > 0 and table.macro(da, real_only=False)[1] > -ni_margin:
+        # the second path: non-inferior on the real datasets, superior over every dataset
+        path, reasons = "all", []
+    return Decision(adopt=bool(path), non_inferior=ni, useful=useful, all_objects=allobj,
+                    useful_all=useful_all, worst=worst, reasons=reasons, path=path)
 
 
 def non_inferior(d: Decision) -> bool:

@@ -91,7 +91,7 @@ def to_markdown(report: dict[str, Any]) -> str:
             out.append(f"| {k if i == 0 else ''} | {kn['default'] if i == 0 else ''} | {e['value']}"
                        f"{' (neutral)' if e['neutral'] else ''} | {_ci(e['useful'])} | {_ci(e['all_objects'])} | "
                        f"{_ci(e['useful_all'])} | {e['worst'][0]} {100 * e['worst'][1]:+.1f} | "
-                       f"{'yes' if e['adopt'] else 'no'} | {'yes' if e['non_inferior'] else 'no'} | "
+                       f"{('yes (' + e['path'] + ')') if e['adopt'] else 'no'} | {'yes' if e['non_inferior'] else 'no'} | "
                        f"{kn['verdict'] if i == 0 else ''} |")
     robust = report.get("robustness") or {}
     if robust:

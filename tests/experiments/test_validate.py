@@ -86,6 +86,33 @@ def test_synthetic_gains_decide_only_where_no_real_frame_changes():
     assert not d.adopt
 
 
+def test_non_inferior_on_real_and_superior_on_all_is_adopted_by_the_second_path():
+    # two real datasets: the candidate wins one frame and loses one (no real gain to show, no real
+    # loss either); the synthetic datasets gain on 4 of 10 frames each: adopted by the second path
+    t = _table({"a": 10, "b": 10, "s1": 10, "s2": 10}, [True, True, False, False])
+    base = np.full(40, 0.5)
+    cand = base.copy()
+    cand[0] += 0.1
+    cand[12] -= 0.1
+    cand[[20, 21, 22, 23, 30, 31, 32, 33]] += 0.5
+    d = decide(t, cand, base, cand, base)
+    assert d.adopt and d.path == "all" and d.useful[1] > -0.02 and d.useful_all[1] > 0, d
+    # the same synthetic gain with a real loss beyond the non-inferiority margin is not adopted
+    cand[[10, 11, 13, 14, 15]] -= 0.2
+    d = decide(t, cand, base, cand, base)
+    assert not d.adopt and d.path == "" and d.useful[1] < -0.02, d
+    # nor with a synthetic dataset losing more than the per-dataset margin
+    cand = base.copy()
+    cand[[20, 21, 22, 23, 24, 25, 26, 27]] += 0.5
+    cand[30:] -= 0.15
+    d = decide(t, cand, base, cand, base)
+    assert not d.adopt and d.worst == ("s2", pytest.approx(-0.15)), d
+    # the first path still reports itself
+    cand = base.copy()
+    cand[:20] += 0.3
+    assert decide(t, cand, base, cand, base).path == "real"
+
+
 def test_the_all_objects_reading_may_not_drop():
     t = _table({"a": 10, "b": 10}, [True, True])
     base = np.full(20, 0.5)
