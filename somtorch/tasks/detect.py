@@ -22,7 +22,7 @@ import torch
 from ..config import AreaConfig
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
-                      select_areas)
+                      rank_score, select_areas)
 from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, _square, box_purity, map_solidity, merge_adjacent, refine_box
 
@@ -75,11 +75,7 @@ class ObjectResult:
     areas: list[ObjectArea]
     kept: list[ObjectArea]
     no_object: bool = False
-
-
-def rank_score(area: ObjectArea, cfg: AreaConfig) -> float:
-    """The salient ranking's score: ``contrast × area_frac ** size_power``."""
-    return area.contrast * area.area_frac ** cfg.size_power
+    fallback: bool = False  # link="continuity" found nothing; the contrast rule (image link) kept these
 
 
 def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
@@ -91,17 +87,25 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
         ``grid_d2`` ``(K, K)`` or None.
     """
     cfg = cfg or AreaConfig()
-    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread)
-    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
+    step = (cfg.step_frac, cfg.step_px) if cfg.link == "continuity" else None
+    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread, step=step)
+    n_valid = int(ctx.valid.sum())
+    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, n_valid=n_valid)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:
         return ObjectResult(stats, areas, kept)
+    if cfg.link == "continuity":  # the boundaries said nothing convincing: the SOM's contrast rule decides
+        plain = replace(cfg, link="image", select="salient")
+        areas = find_object_areas(ref_disparity, grid_d2, stats, plain, n_valid=n_valid)
+        kept = kept_areas(areas, stats, labels, plain, ctx)
+        if kept:
+            return ObjectResult(stats, areas, kept, fallback=True)
     # nothing convincing: keep the whole map rather than nothing
     ys, xs = ctx.valid.nonzero(as_tuple=True)
     box = (int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())) if ys.numel() else (0, 0, -1, -1)
     whole = ObjectArea(sorted({int(v) for v in labels.unique().tolist()} - {-1}), int(ctx.valid.sum()), box,
                        float(torch.masked_select(ctx.disparity, ctx.valid).mean()) if ys.numel() else 0.0, 0.0, 1.0, 0, confidence=0.0)
-    return ObjectResult(stats, areas, [whole], no_object=True)
+    return ObjectResult(stats, areas, [whole], no_object=True, fallback=cfg.link == "continuity")
 
 
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
@@ -127,6 +131,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         ``labels`` ``(H, W)``.
     """
     checks = cfg.min_purity > 0 or cfg.min_solidity > 0
+    n_valid = int(ctx.valid.sum())
     areas_max = cfg.max_areas if cfg.keep_ratio < 1 else 1  # a ratio of 1 keeps only the best
     tries = areas_max + (cfg.purity_candidates - 1 if checks else 0)
     ranked = select_areas(areas, stats, replace(cfg, max_areas=tries))
@@ -142,7 +147,8 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         if kept and confidence < cfg.keep_ratio:
             break
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
-                                max_area_frac=cfg.max_area_frac, exclude=taken)[0]
+                                max_area_frac=cfg.max_area_frac, exclude=taken,
+                                total=n_valid)[0]
         done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                           stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
                           clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)
