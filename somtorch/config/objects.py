@@ -107,6 +107,10 @@ class AreaConfig(Validated):
             similarity of the segments' mean disparities is asked. When no candidate passes the
             checks, the image link with the salient rank decides instead (flagged ``fallback``).
         step_frac, step_px: that step bound.
+        join_continuous: ``merge`` also joins an adjacent segment whose boundary with the area is
+            at least ``continuous_frac`` continuous in depth, whatever its mean disparity.
+        coherent: a segment straddling a depth edge (its inner discontinuous pixel pairs at least
+            ``min_boundary`` of its perimeter) links by the similarity rule instead.
 
     Selection — which areas are kept:
         select: ``"nearest"`` (largest mean disparity, the paper's), ``"salient"`` (ranked by
@@ -155,7 +159,7 @@ class AreaConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice(options.LINKS),
         "spread": Choice(options.SPREADS), "min_boundary": NON_NEGATIVE,
-        "continuous_frac": FRACTION, "step_frac": NON_NEGATIVE, "step_px": NON_NEGATIVE,
+        "continuous_frac": FRACTION, "step_frac": NON_NEGATIVE, "step_px": NON_NEGATIVE, "coherent": BOOL, "join_continuous": BOOL,
         "size_power": NON_NEGATIVE, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
@@ -178,6 +182,8 @@ class AreaConfig(Validated):
     continuous_frac: float = 0.5
     step_frac: float = 0.05
     step_px: float = 1.0
+    coherent: bool = False
+    join_continuous: bool = False
     size_power: float = 0.25
     grow_stride: int = 2
     map_stride: int = 2

@@ -87,7 +87,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
         ``grid_d2`` ``(K, K)`` or None.
     """
     cfg = cfg or AreaConfig()
-    step = (cfg.step_frac, cfg.step_px) if cfg.link == "continuity" else None
+    step = (cfg.step_frac, cfg.step_px) if cfg.link == "continuity" or cfg.join_continuous else None
     stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread, step=step)
     n_valid = int(ctx.valid.sum())
     areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, n_valid=n_valid)
@@ -148,7 +148,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             break
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
                                 max_area_frac=cfg.max_area_frac, exclude=taken,
-                                total=n_valid)[0]
+                                total=n_valid, continuous_frac=cfg.continuous_frac if cfg.join_continuous else None)[0]
         done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                           stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
                           clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)

@@ -50,6 +50,8 @@ class NeuronStats:
             (:func:`continuous_step`) ``(K, K)``: a surface running on across the boundary; None when
             not computed.
         frame: pixels of each segment on the image frame (first / last row and column) ``(K,)``.
+        inner_edge: pixel pairs *inside* each segment across which the disparity is not continuous
+            ``(K,)``: a segment that straddles a depth edge has a line of them; None when not computed.
         perimeter: boundary length of each segment with other segments ``(K,)``.
     """
 
@@ -61,6 +63,7 @@ class NeuronStats:
     d_robust: tuple[float, float]
     continuous: torch.Tensor | None = None
     frame: torch.Tensor | None = None
+    inner_edge: torch.Tensor | None = None
 
     @property
     def perimeter(self) -> torch.Tensor:
@@ -193,11 +196,14 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     edge = torch.zeros(h, w, dtype=torch.bool)  # the image frame: first and last row and column
     edge[0], edge[-1], edge[:, 0], edge[:, -1] = True, True, True, True
     frame = torch.bincount(lab[edge], minlength=k + 1)[:k].double()
-    continuous = None
+    continuous = inner = None
     if step is not None:  # pairs with an invalid pixel carry key K and drop out of the (K, K) block
-        continuous = symmetric(torch.bincount(flat[torch.cat(smooth)], minlength=(k + 1) ** 2))
+        smooth_all = torch.cat(smooth)
+        continuous = symmetric(torch.bincount(flat[smooth_all], minlength=(k + 1) ** 2))
+        same = torch.bincount(flat[~smooth_all], minlength=(k + 1) ** 2).view(k + 1, k + 1)
+        inner = same.diagonal()[:k].double()
     d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
-    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, continuous, frame)
+    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, continuous, frame, inner)
 
 
 def _components(adj: torch.Tensor) -> list[list[int]]:
@@ -273,7 +279,17 @@ def continuity_links(stats: NeuronStats, cfg: AreaConfig) -> torch.Tensor:
     if stats.continuous is None:
         raise ValueError("objects.link='continuity' needs the boundary statistics: call neuron_stats(..., step=...)")
     share = stats.continuous / stats.boundary.clamp_min(1.0)
-    return _touching(stats, cfg.min_boundary) & (share >= cfg.continuous_frac)
+    touch = _touching(stats, cfg.min_boundary)
+    links = touch & (share >= cfg.continuous_frac)
+    if not cfg.coherent:
+        return links
+    # a segment that straddles a depth edge (an inner edge at least min_boundary of its perimeter)
+    # says nothing about continuity: its pairs link by the similarity rule instead
+    torn = stats.inner_edge >= cfg.min_boundary * stats.perimeter.clamp_min(1.0)
+    either = torn[:, None] | torn[None, :]
+    ref = torch.nan_to_num(stats.mean_d.double())
+    similar = (ref[:, None] - ref[None, :]).abs() < cfg.similarity * stats.spread(cfg.spread)
+    return torch.where(either, touch & similar, links)
 
 
 def areas_of(comps: list[list[int]], stats: NeuronStats, *, total: float | None = None) -> list[ObjectArea]:

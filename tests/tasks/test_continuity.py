@@ -133,3 +133,21 @@ def test_an_object_that_is_all_the_ground_cut_leaves_is_kept():
     assert not res.no_object and not res.fallback
     assert sorted(res.kept[0].neurons) == [0, 1, 2, 3] and res.kept[0].area_frac == pytest.approx(0.2)
     assert res.kept[0].box == (40, 10, 89, 29)
+
+
+def test_a_segment_straddling_a_depth_edge_links_by_similarity_instead():
+    # segment 1 straddles the edge between a wall (d 20, segment 0) and a box (d 40, segment 2): it
+    # is continuous with both, so continuity alone chains wall and box; with ``coherent`` its inner
+    # edge marks it torn, and its links fall back to the similarity rule
+    h, w = 30, 90
+    disp = torch.full((h, w), 20.0, dtype=torch.float64)
+    disp[:, 45:] = 40.0
+    labels = torch.zeros(h, w, dtype=torch.long)
+    labels[:, 30:60] = 1
+    labels[:, 60:] = 2
+    stats = neuron_stats(labels, disp, 3, step=STEP)
+    assert stats.inner_edge.tolist() == [0.0, float(h), 0.0]
+    chained = find_object_areas(stats.mean_d, None, stats, AreaConfig(link="continuity"))
+    assert len(chained) == 1
+    split = find_object_areas(stats.mean_d, None, stats, AreaConfig(link="continuity", coherent=True))
+    assert sorted(sorted(a.neurons) for a in split) == [[0], [1], [2]]
