@@ -15,7 +15,7 @@ and ``results.md`` into the Hydra run folder, both staged and moved in only when
     python -m experiments.real_scenes 'frames=[kitti_est,motorcycle_q_sgbm,eth3d_terrace_sgbm,flyingthings3d_sgbm]'
     python -m experiments.real_scenes 'datasets=[oakd]' objects.min_solidity=0
     python -m experiments.real_scenes +preset=paper
-    python -m experiments.real_scenes 'methods=[som,uv_disparity,dsw]'   # the task-level baselines beside it
+    python -m experiments.real_scenes 'methods=[som,plane_components,uv_disparity,dsw]'   # task baselines beside it
 
 ``methods``: ``som`` is the configured pipeline (any ``method=`` segmenter); every other name is a
 task baseline of the registry :mod:`somtorch.tasks.baselines` (``uv_disparity``, ``dsw``,
