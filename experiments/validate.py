@@ -111,6 +111,10 @@ class SceneCache:
             self._scene = self._loader()
         return self._scene
 
+    def fresh_scene(self) -> Any:
+        """The frame's scene, loaded again (and not kept) where this cache does not hold it."""
+        return self._scene if self._scene is not None else self._loader()
+
     def members(self, overrides: dict[str, Any]) -> tuple[Any, list]:
         """``(ground plane, member results)`` of the base config with ``overrides``; the segmentation
         is computed once per upstream setting (features, ground, SOM, training)."""

@@ -26,7 +26,7 @@ def score_baselines(caches: list[Any], names: list[str], reduction: Any) -> dict
 
     out: dict[str, dict[str, Any]] = {}
     for c in caches:
-        scene, per = c.scene, {}
+        scene, per = c.fresh_scene(), {}  # (not kept: 352 frames' maps would stay in memory)
         for name in names:
             t0 = time.perf_counter()
             runs = run_baseline(name, scene, reduction)

@@ -77,6 +77,14 @@ def test_one_component_covering_everything_is_flagged_empty():
     assert plane_components_boxes(bowl, v) == []  # the whole map: nothing to point at
 
 
+def test_a_map_that_is_all_plane_leaves_nothing():
+    ys, xs = _grid()
+    d = (10.0 + 0.12 * ys + 0.02 * xs).float()
+    v = torch.ones(H, W, dtype=torch.bool)
+    assert support_plane(d.double().numpy(), v.numpy())[0].all()
+    assert plane_components_boxes(d, v) == []
+
+
 @pytest.mark.parametrize("kind", ["streaky_sgbm", "smooth_8bit"])
 def test_hard_maps_never_crash(kind):
     d, v = _box_on_tilted_plane()
