@@ -380,14 +380,27 @@ def pictures_page() -> str:
 
 # ---------------------------------------------------------------------------------------- the build
 def write_all() -> None:
-    """Write every generated page into the build (mkdocs-gen-files' virtual files)."""
+    """Write every generated page into the build (mkdocs-gen-files' virtual files). A public name
+    without a docstring, or a config key the configuration reference does not name, is a warning,
+    so the strict build stops with the name and the file."""
+    import logging
+
     import mkdocs_gen_files
 
+    log = logging.getLogger("mkdocs.plugins.somtorch_docs")
+    for missing in undocumented():
+        log.warning("gen_pages.py: public name without a docstring: %s", missing)
+    config = config_page()
+    for command, keys in config_keys().items():
+        for key in keys:
+            if f"`{key}`" not in config:
+                log.warning("gen_pages.py: config key %s of %s is missing from reference/config.md", key,
+                            COMMANDS[command])
     for page, text in api_pages().items():
         with mkdocs_gen_files.open(f"reference/{page}", "w") as f:
             f.write(text)
     with mkdocs_gen_files.open("reference/config.md", "w") as f:
-        f.write(config_page())
+        f.write(config)
     with mkdocs_gen_files.open("pictures.md", "w") as f:
         f.write(pictures_page())
     for nb in sorted((ROOT / "notebooks").glob("*.ipynb")):
