@@ -141,8 +141,12 @@ def _page(path: str) -> str:
 
 
 def _summary(obj: Any) -> str:
+    if obj.is_attribute and not _has_doc(obj):  # a table or constant: its value
+        value = str(obj.value or "")
+        return f"`{value if len(value) <= 60 else value[:57] + '...'}`".replace("|", "\\|")
     doc = obj.docstring.value.strip() if _has_doc(obj) else ""
     first = doc.split("\n\n", 1)[0].replace("\n", " ")
+    first = re.sub(r":\w+:`~?(?:[\w]+\.)*([^`]+)`", r"`\1`", first)  # a Sphinx role: its name as code
     return re.split(r"(?<=\.)\s", first, maxsplit=1)[0].replace("|", "\\|")
 
 
@@ -159,7 +163,7 @@ def api_pages(pkg: Any | None = None) -> dict[str, str]:
     for module in public_modules(pkg):
         depth = module.path.count(".")
         label = module.path if depth == 0 else module.name
-        if module.is_package:
+        if module.is_init_module:
             rows, rendered = [], []
             for name in api[module.path]:
                 target = name.target
@@ -167,9 +171,11 @@ def api_pages(pkg: Any | None = None) -> dict[str, str]:
                 if not target.is_module and any(part.startswith("_") for part in home.split(".")):
                     rendered.append(f"::: {target.path}\n    options:\n      heading_level: 3\n")
                     continue
-                rows.append(f"| [`{name.path.rsplit('.', 1)[1]}`][{target.path}] | {_summary(target)} |")
-            text = [f"# `{module.path}`\n", f"::: {module.path}\n    options:\n      members: false\n      "
-                    "show_root_heading: false\n"]
+                if target.path != name.path:  # defined in a submodule (the package's own: rendered above)
+                    rows.append(f"| [`{name.path.rsplit('.', 1)[1]}`][{target.path}] | {_summary(target)} |")
+            own = rendered_names(module)  # what the package's __init__ itself defines
+            text = [f"# `{module.path}`\n", f"::: {module.path}\n    options:\n      members: "
+                    f"{'[' + ', '.join(own) + ']' if own else 'false'}\n      show_root_heading: false\n"]
             if rows:
                 text += ["## Public names\n", "| name | what it is |", "|---|---|", *rows, ""]
             text += rendered

@@ -65,6 +65,27 @@ def crossref(obj: Any, tilde: str, target: str, base: str) -> str:
     return f"[`{shown}`][{canonical or (base + target if target.startswith('.') else target)}]"
 
 
+def fence_doctests(text: str) -> str:
+    """Put each run of doctest lines (``>>>`` and the output up to a blank line) into a ``pycon``
+    code block: Markdown would read a bare ``>>>`` as nested quotes."""
+    lines, out, i, fenced = text.split("\n"), [], 0, False
+    while i < len(lines):
+        line = lines[i]
+        stripped = line.lstrip()
+        fenced ^= stripped.startswith("```")
+        if stripped.startswith(">>>") and not fenced:
+            indent = line[:len(line) - len(stripped)]
+            block = []
+            while i < len(lines) and lines[i].strip() and lines[i].startswith(indent):
+                block.append(lines[i][len(indent):])
+                i += 1
+            out += [indent + "```pycon", *(indent + b for b in block), indent + "```"]
+            continue
+        out.append(line)
+        i += 1
+    return "\n".join(out)
+
+
 def _objects(obj: Any) -> Any:
     yield obj
     for member in obj.members.values():
@@ -75,7 +96,9 @@ def _objects(obj: Any) -> Any:
 class SphinxRoles(griffe.Extension):
     """Rewrite the Sphinx roles of every docstring of the package into autorefs links, once the
     whole package is loaded; give its lazily imported public names (``somtorch.SOM``, served by a
-    module ``__getattr__`` that static analysis cannot follow) their aliases."""
+    module ``__getattr__`` that static analysis cannot follow) their aliases; leave out the
+    undocumented instance attributes a class's ``__init__`` assigns (its docstring's Attributes
+    section lists them); fence the doctests."""
 
     def on_package(self, *, pkg: Any, **kwargs: Any) -> None:  # griffe calls it once the package is loaded
         for name in map(str, pkg.exports or []):
@@ -87,8 +110,17 @@ class SphinxRoles(griffe.Extension):
                 continue
             if origin and origin != pkg.path:
                 pkg.set_member(name, griffe.Alias(name, f"{origin}.{name}", parent=pkg))
-        for obj in _objects(pkg):
-            if obj.docstring is None or ":`" not in obj.docstring.value:
+        for obj in list(_objects(pkg)):
+            if obj.is_class:  # `self.rows = check(...)` in __init__: the Attributes section documents them
+                for name, member in list(obj.members.items()):
+                    if (not member.is_alias and member.is_attribute and member.labels == {"instance-attribute"}
+                            and member.docstring is None):
+                        obj.del_member(name)
+            if obj.docstring is None:
+                continue
+            if ">>>" in obj.docstring.value:
+                obj.docstring.value = fence_doctests(obj.docstring.value)
+            if ":`" not in obj.docstring.value:
                 continue
             mod = obj if obj.is_module else obj.module
             base = mod.path if mod.is_init_module or mod.parent is None else mod.parent.path  # .x: a sibling
