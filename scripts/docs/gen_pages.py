@@ -353,6 +353,7 @@ def pictures_page() -> str:
     if m:
         out += [f"![summary of one run](img/{m.group(1)})", "", "*" + m.group(2).replace("\n", " ") + "*", ""]
     used: dict[str, tuple[str, str, str]] = {}
+    notes: dict[str, str] = {}  # an image's own words where a page gives them: the rest of its table cell
     for page in sorted((ROOT / "docs").glob("*.md")):
         text = page.read_text()
         heads = _headings(text)
@@ -363,6 +364,9 @@ def pictures_page() -> str:
             rest = text[pos:].split("\n\n")
             legend = rest[1].replace("\n", " ") if len(rest) > 1 and not rest[1].lstrip().startswith(("|", "!", "`")) else ""
             used.setdefault(hit.group(1), (page.name, head, legend))
+        for img in re.finditer(r"!\[[^\]]*\]\(gallery/([^)\s]+\.png)\)([^|\n]*)", text):
+            if img.group(2).strip():
+                notes.setdefault(img.group(1), img.group(2).strip())
     synth_doc = importlib.import_module("experiments.synth_gallery").__doc__ or ""
     synth_legend = synth_doc.split("\n\n")[1].replace("\n", " ") if "\n\n" in synth_doc else ""
     groups: dict[tuple[str, str, str], list[str]] = {}
@@ -380,7 +384,8 @@ def pictures_page() -> str:
             anchor = "" if head.startswith("The generator") else f"#{_slug(head)}"
             out += [f"From [{page}]({page}{anchor}). {legend}".strip(), ""]
         for name in names:
-            out += [f"![{Path(name).stem}](gallery/{name})", "", f"*`{Path(name).stem}`*", ""]
+            note = f" — {notes[name]}" if name in notes else ""
+            out += [f"![{Path(name).stem}](gallery/{name})", "", f"*`{Path(name).stem}`*{note}", ""]
     return "\n".join(out)
 
 
