@@ -216,8 +216,19 @@ def describe(rule: Any) -> str:
     return type(rule).__name__
 
 
+def _md(text: object) -> str:
+    """Docstring text for a Markdown page: one line; a Sphinx role to a somtorch name becomes a link
+    into the reference (checked by the strict build), any other its name as code."""
+    def role(m: re.Match) -> str:
+        tilde, target = m.group(1), m.group(2)
+        shown = target.rsplit(".", 1)[-1] if tilde else target
+        return f"[`{shown}`][{target}]" if target.startswith(PACKAGE + ".") else f"`{shown}`"
+
+    return re.sub(r":\w+:`(~?)([^`]+)`", role, re.sub(r"\s+", " ", str(text)).strip())
+
+
 def _cell(text: object) -> str:
-    return str(text).replace("|", "\\|").replace("\n", " ")
+    return _md(text).replace("|", "\\|")
 
 
 def _key_table(rows: list[tuple[str, object, str]], constraints: dict[str, Any], prefix: str) -> list[str]:
