@@ -113,8 +113,8 @@ class SphinxRoles(griffe.Extension):
         for obj in list(_objects(pkg)):
             if obj.is_class:  # `self.rows = check(...)` in __init__: the Attributes section documents them
                 for name, member in list(obj.members.items()):
-                    if (not member.is_alias and member.is_attribute and member.labels == {"instance-attribute"}
-                            and member.docstring is None):
+                    if (not member.is_alias and member.is_attribute
+                            and member.labels == {"instance-attribute"} and member.docstring is None):
                         obj.del_member(name)
             if obj.docstring is None:
                 continue

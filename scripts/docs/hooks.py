@@ -26,5 +26,6 @@ def on_page_markdown(markdown: str, *, page: Any, **kwargs: Any) -> str:
         if f"]({written})" in markdown:
             markdown = markdown.replace(f"]({written})", f"]({meant})")
         else:
-            log.info("hooks.py: %s no longer links %s; delete its MENDED_LINKS entry", page.file.src_uri, written)
+            log.info("hooks.py: %s no longer links %s; delete its MENDED_LINKS entry", page.file.src_uri,
+                     written)
     return markdown
