@@ -32,9 +32,11 @@ def pictures_page() -> str:
         out += [f"![summary of one run](img/{m.group(1)})", "", "*" + m.group(2).replace("\n", " ") + "*", ""]
     used: dict[str, tuple[str, str, str]] = {}
     notes: dict[str, str] = {}  # an image's own words where a page gives them: the rest of its table cell
+    titles: dict[str, str] = {}  # page -> its title
     for page in sorted((ROOT / "docs").glob("*.md")):
         text = page.read_text()
         heads = _headings(text)
+        titles[page.name] = re.sub(r"[`*]", "", heads[0][1]) if heads else page.stem
         for hit in re.finditer(r"\(gallery/([^)\s]+\.png)\)", text):
             before = [h for pos, h in heads if pos < hit.start()]
             head = before[-1] if before else page.stem
@@ -62,7 +64,7 @@ def pictures_page() -> str:
         out += [f"## {re.sub(r'[`]', '', head)}", ""]
         if page:
             anchor = "" if head.startswith("The generator") else f"#{_slug(head)}"
-            out += [f"From [{page}]({page}{anchor}). {legend}".strip(), ""]
+            out += [f"From [{titles.get(page, page)}]({page}{anchor}). {legend}".strip(), ""]
         for name in names:
             note = f" — {notes[name]}" if name in notes else ""
             out += [f"![{Path(name).stem}](gallery/{name})", "", f"*`{Path(name).stem}`*{note}", ""]
