@@ -49,12 +49,15 @@ def _descriptions(cls: type | str | None) -> dict[str, str]:
     return {k: re.split(r"(?<=\.)\s", v, maxsplit=1)[0] for k, v in out.items()}
 
 
-def _fields(cls: type, prefix: str, instance: object = None) -> list[str]:
-    """``  prefix.key=default  — description`` of every leaf field of ``cls`` (defaults read from
-    ``instance`` where given: a field whose default is a configured instance of ``cls``)."""
+def field_rows(cls: type, prefix: str, instance: object = None) -> list[tuple[str, object, str]]:
+    """``[(key, default, description)]`` of a config dataclass's own fields (nested dataclasses
+    left out), the description being the first sentence of the field's docstring entry: what
+    ``--help`` lists and the site's configuration reference tabulates (``scripts/docs/gen_pages.py``).
+    Defaults are read from ``instance`` where given (a field whose default is a configured instance
+    of ``cls``)."""
     import typing
 
-    lines = []
+    rows = []
     desc = _descriptions(cls)
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
@@ -62,9 +65,12 @@ def _fields(cls: type, prefix: str, instance: object = None) -> list[str]:
             continue
         default = getattr(instance, f.name) if instance is not None else f.default if f.default is not dataclasses.MISSING else (
             f.default_factory() if f.default_factory is not dataclasses.MISSING else "???")
-        d = desc.get(f.name, "")
-        lines.append(f"  {prefix}{f.name}={default!r}" + (f"  — {d}" if d else ""))
-    return lines
+        rows.append((f"{prefix}{f.name}", default, desc.get(f.name, "")))
+    return rows
+
+
+def _fields(cls: type, prefix: str, instance: object = None) -> list[str]:
+    return [f"  {k}={v!r}" + (f"  — {d}" if d else "") for k, v, d in field_rows(cls, prefix, instance)]
 
 
 def prog(module: str, argv0: str | None = None) -> str:
@@ -123,42 +129,13 @@ def _own_fields(module: str) -> list[tuple[str, str, str]]:
     return fields(own[0], "") if own else []
 
 
-def _tool_help(module: str, argv0: str | None) -> str:
-    """The help of a command that is not a pipeline run: its schema's keys, nested ones by prefix."""
-    import typing
-
-    from .synth_config import SynthConfig
-    from .tool_configs import GroundReportConfig, SynthGalleryConfig
-
-    cls = {"synth": SynthConfig, "ground_report": GroundReportConfig, "synth_gallery": SynthGalleryConfig}[module]
-    lines = [f"{prog(module, argv0)} [key=value ...]", f"  {USAGE[module]}", "", f"Keys ({cls.__name__}):"]
-    lines += _fields(cls, "")
-    hints, desc = typing.get_type_hints(cls), _descriptions(cls)
-    for f in dataclasses.fields(cls):
-        sub = hints.get(f.name)
-        if dataclasses.is_dataclass(sub):
-            lines += ["", f"{f.name}.* ({sub.__name__}): {desc.get(f.name, '')}"]
-            lines += _fields(sub, f.name + ".", f.default_factory())  # type: ignore[misc]
-    return "\n".join(lines)
-
-
-def help_text(name: str, argv0: str | None = None) -> str:
+def top_keys(module: str) -> tuple[dict[str, object], dict[str, str], list[tuple[str, str, str]]]:
+    """``(defaults, descriptions, nested)`` of an experiment's top-level keys: the pipeline's own
+    (method, ensemble, seed, object_id, device), label, and what the experiment's schema class and
+    YAML add (a value the YAML sets replaces the dataclass default); ``nested``: the experiment's
+    own ``group.key`` fields as ``(key, default, description)``."""
     from somtorch import config as C
 
-    from .cli import config_groups
-    from .data_schema import DataSource, PathsConfig
-
-    groups = config_groups()
-    module = "real_scenes" if name == "scenes" else name
-    if module in ("synth", "ground_report", "synth_gallery"):  # not a pipeline run: its own keys only
-        return _tool_help(module, argv0)
-    lines = [f"{prog(module, argv0)} [group=option ...] [key=value ...]",
-             f"  {USAGE.get(module, '')}", "",
-             "Config groups (group=option; '+preset=paper' and '+experiment=...' add one):"]
-    for g, opts in groups.items():
-        lines.append(f"  {g}: {', '.join(opts)}")
-    # top-level keys: the pipeline's own (method, ensemble, seed, object_id, device), label, and what
-    # the experiment's YAML adds; a value the YAML sets replaces the dataclass default
     own = CONF / f"{module}.yaml"
     doc, comments = {}, {}
     if own.is_file():
@@ -179,9 +156,57 @@ def help_text(name: str, argv0: str | None = None) -> str:
             top[key] = _Literal(default)
             desc[key] = d
     top.update(doc)
+    return top, {k: desc.get(k) or comments.get(k, "") for k in top}, nested
+
+
+def sections(module: str) -> list[tuple[str, type]]:
+    """``[(prefix, dataclass)]``: the key groups of an experiment's config after its top-level keys."""
+    from somtorch import config as C
+
+    out = [("features", C.FeatureConfig), ("som", C.SOMConfig), ("train", C.TrainConfig),
+           ("ground", C.GroundConfig), ("objects", C.AreaConfig), ("reduction", C.ReductionConfig),
+           ("output", C.OutputConfig), ("baseline", C.BaselineConfig), ("resources", C.ResourcesConfig)]
+    if module == "video":
+        out.append(("sequence", C.WarmStartConfig))
+    return out
+
+
+def _tool_help(module: str, argv0: str | None) -> str:
+    """The help of a command that is not a pipeline run: its schema's keys, nested ones by prefix."""
+    import typing
+
+    from .synth_config import SynthConfig
+    from .tool_configs import GroundReportConfig, SynthGalleryConfig
+
+    cls = {"synth": SynthConfig, "ground_report": GroundReportConfig, "synth_gallery": SynthGalleryConfig}[module]
+    lines = [f"{prog(module, argv0)} [key=value ...]", f"  {USAGE[module]}", "", f"Keys ({cls.__name__}):"]
+    lines += _fields(cls, "")
+    hints, desc = typing.get_type_hints(cls), _descriptions(cls)
+    for f in dataclasses.fields(cls):
+        sub = hints.get(f.name)
+        if dataclasses.is_dataclass(sub):
+            lines += ["", f"{f.name}.* ({sub.__name__}): {desc.get(f.name, '')}"]
+            lines += _fields(sub, f.name + ".", f.default_factory())  # type: ignore[misc]
+    return "\n".join(lines)
+
+
+def help_text(name: str, argv0: str | None = None) -> str:
+    from .cli import config_groups
+    from .data_schema import DataSource, PathsConfig
+
+    groups = config_groups()
+    module = "real_scenes" if name == "scenes" else name
+    if module in ("synth", "ground_report", "synth_gallery"):  # not a pipeline run: its own keys only
+        return _tool_help(module, argv0)
+    lines = [f"{prog(module, argv0)} [group=option ...] [key=value ...]",
+             f"  {USAGE.get(module, '')}", "",
+             "Config groups (group=option; '+preset=paper' and '+experiment=...' add one):"]
+    for g, opts in groups.items():
+        lines.append(f"  {g}: {', '.join(opts)}")
+    top, desc, nested = top_keys(module)
     lines += ["", "Top-level keys:"]
     for k, v in top.items():
-        d = desc.get(k) or comments.get(k, "")
+        d = desc[k]
         lines.append(f"  {k}={v!r}" + (f"  — {d}" if d else ""))
     lines += ["", "data.* (where the disparity comes from; conf/data/<option>.yaml sets them):"]
     lines += _fields(DataSource, "data.")
@@ -189,12 +214,7 @@ def help_text(name: str, argv0: str | None = None) -> str:
                  " minDisparity, numDisparities, blockSize, P1, P2, disp12MaxDiff, uniquenessRatio,"
                  " speckleWindowSize, speckleRange, mode), e.g. data.sgbm.numDisparities=64")
     lines += ["", "paths.* (PathsConfig):"] + _fields(PathsConfig, "paths.")
-    sections = [("features", C.FeatureConfig), ("som", C.SOMConfig), ("train", C.TrainConfig),
-                ("ground", C.GroundConfig), ("objects", C.AreaConfig), ("reduction", C.ReductionConfig),
-                ("output", C.OutputConfig), ("baseline", C.BaselineConfig), ("resources", C.ResourcesConfig)]
-    if module == "video":
-        sections.append(("sequence", C.WarmStartConfig))
-    for prefix, cls in sections:
+    for prefix, cls in sections(module):
         lines += ["", f"{prefix}.* ({cls.__name__}):"] + _fields(cls, prefix + ".")
         lines += [f"  {k}={v}" + (f"  — {d}" if d else "") for k, v, d in nested if k.startswith(prefix + ".")]
     if module == "study":

@@ -141,6 +141,7 @@ def run_records(scene, result, obj_mask, per_run_s: list[float] | None) -> dict[
 
 
 def merge_runs(parts: list[dict[str, list]]) -> dict[str, list]:
+    """Concatenate the per-run lists of several parts (e.g. scenes or workers) key by key."""
     out: dict[str, list] = {}
     for p in parts:
         for k, v in p.items():
@@ -184,6 +185,8 @@ def summarize_runs(runs: dict[str, list], x_opt: float | None) -> dict[str, Any]
 
 
 def per_object_scores(scene, results: list) -> dict[str, Any]:
+    """Per labelled object of ``scene`` (with valid pixels): its name, whether it is main, and how many of the
+    runs in ``results`` identified it."""
     out = {}
     for info in scene.object_info:
         mask = scene.object_mask(info.id)

@@ -35,6 +35,7 @@ class Interrupted(BaseException):
 
     @property
     def signal_name(self) -> str:
+        """The signal's name (``SIGINT``, ``SIGTERM``), or ``signal <n>`` when it has none."""
         try:
             return signal.Signals(self.signum).name
         except ValueError:
@@ -42,6 +43,7 @@ class Interrupted(BaseException):
 
     @property
     def exit_code(self) -> int:
+        """The shell's exit status for the signal: 128 + its number."""
         return 128 + self.signum
 
 

@@ -39,6 +39,17 @@ _BYTES_PER_PX = 96  # disparity, mask, features, coordinates, BMU temporaries of
 
 @dataclass
 class LargeResult:
+    """What :func:`train_segment_large` returns.
+
+    Attributes:
+        som: the trained map.
+        labels: BMU per pixel ``(H, W)``, int16 (a memory map on disk, or an array); -1 = invalid.
+        n_valid: valid pixels of the map.
+        n_train: pixels the SOM was trained on.
+        block_rows: image rows per block of the streamed passes.
+        timings: seconds per stage.
+    """
+
     som: SOM
     labels: np.ndarray  # (H, W) int16 memory map (or array): BMU per pixel, -1 invalid
     n_valid: int

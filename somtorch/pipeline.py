@@ -58,6 +58,26 @@ class MemberResult:
 
 @dataclass
 class PipelineResult:
+    """What :func:`run_pipeline` returns: the segmentation and, per ensemble member, its kept areas,
+    reduction and score.
+
+    Attributes:
+        features: the features of every valid pixel (those that are segmented).
+        train_features: the features the segmenter was trained on (every ``train_stride``-th pixel).
+        som: the trained maps (method ``som`` / ``minisom``); None for the other methods.
+        labels: segment per pixel ``(E, H, W)``; -1 = not segmented (invalid or ground plane).
+        ref_disparity: reference disparity of each segment in px ``(E, K)``.
+        members: one :class:`MemberResult` per ensemble member.
+        timings: seconds per stage.
+        quantization_error: per member ``(E,)``.
+        topographic_error: per member ``(E,)``.
+        ground: the verified ground plane, or None.
+        method: the segmenter's name.
+        prototypes: feature-space centres ``(E, K, D)`` (SOM weights, k-means centres), or None.
+        segmentation: the segmenter's own result, or None.
+        config: the config that made it.
+    """
+
     features: Features
     train_features: Features
     som: SOM | None  # the trained maps (method "som" / "minisom"); None for the other methods
@@ -76,6 +96,7 @@ class PipelineResult:
 
     @property
     def num_segments(self) -> int:
+        """Segments per member ``K`` (neurons, clusters or superpixels)."""
         return int(self.ref_disparity.shape[-1])
 
 

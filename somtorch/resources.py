@@ -80,6 +80,7 @@ class Estimate:
 
     @property
     def seconds(self) -> float:
+        """Expected seconds in all: training + labelling + object step."""
         return self.train_s + self.label_s + self.objects_s
 
     def times(self, n: int | float) -> Estimate:
@@ -88,6 +89,7 @@ class Estimate:
                         self.train_s * n, self.label_s * n, self.objects_s * n)
 
     def describe(self) -> str:
+        """The estimate in one line: peak memory by stage and the expected time."""
         return (f"~{fmt_bytes(self.peak_bytes)} peak (training {fmt_bytes(self.train_bytes)}, labelling "
                 f"{fmt_bytes(self.label_bytes)}, objects {fmt_bytes(self.objects_bytes)}), ~{fmt_seconds(self.seconds)}")
 
@@ -214,6 +216,7 @@ def check(est: Estimate, *, max_memory_frac: float = 0.8, max_hours: float = 24.
 
 
 def fmt_bytes(b: float) -> str:
+    """A byte count for people: GiB, MiB or bytes."""
     for unit, size in (("GiB", GIB), ("MiB", 1 << 20)):
         if b >= size:
             return f"{b / size:.1f} {unit}"
@@ -221,6 +224,7 @@ def fmt_bytes(b: float) -> str:
 
 
 def fmt_seconds(s: float) -> str:
+    """A duration for people: seconds up to years."""
     if s >= 86400 * 365:
         return f"{s / (86400 * 365):.2g} years"
     if s >= 86400:

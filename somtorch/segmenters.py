@@ -53,6 +53,7 @@ class Segmentation:
 
     @property
     def num_segments(self) -> int:
+        """Segments per member ``K``."""
         return int(self.ref_disparity.shape[-1])
 
 

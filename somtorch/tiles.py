@@ -13,7 +13,7 @@ into a grid of tiles that overlap by ``overlap`` of a tile's side, runs steps 1a
    background, so the reassembled areas are ranked with the object step's own score (contrast ×
    area share of the whole map ^ ``size_power``) and kept under the same ``max_areas`` /
    ``keep_ratio`` rule as one map's areas;
-3. reduces the whole map with the kept boxes (step 1d) and scores it like :func:`run_pipeline`.
+3. reduces the whole map with the kept boxes (step 1d) and scores it like :func:`~somtorch.pipeline.run_pipeline`.
 
 Each tile is an independent problem (its own SOM, ground plane and disparity spread), which is
 what makes it parallel; the price is that context across tiles (the ground under a far object,
@@ -103,6 +103,15 @@ class TiledMember:
 
 @dataclass
 class TiledResult:
+    """What :func:`run_tiled` returns.
+
+    Attributes:
+        members: per ensemble member, the merged kept areas, reduction and score.
+        windows: the tiles ``(y0, y1, x0, x1)`` in pixels (end exclusive, see :func:`tile_windows`).
+        timings: seconds: ``"tiles"`` (wall, all workers), ``"merge"``, ``"total"``.
+        tile_seconds: each tile's own pipeline time.
+    """
+
     members: list[TiledMember]
     windows: list[tuple[int, int, int, int]]
     timings: dict[str, float]  # seconds: "tiles" (wall, all workers), "merge", "total"

@@ -54,6 +54,7 @@ class FrameResult:
 
     @property
     def seconds(self) -> float:
+        """The frame's time in all: the sum of its stage timings."""
         return sum(self.timings.values())
 
 

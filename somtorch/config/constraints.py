@@ -32,6 +32,7 @@ class Interval:
     optional: bool = False
 
     def describe(self) -> str:
+        """The interval in words, e.g. ``a number in (0, inf)``."""
         lo = "-inf" if self.lo is None else f"{self.lo:g}"
         hi = "inf" if self.hi is None else f"{self.hi:g}"
         left = "(" if self.open_lo or self.lo is None else "["
@@ -40,6 +41,7 @@ class Interval:
         return f"{kind} in {left}{lo}, {hi}{right}"
 
     def check(self, name: str, value: Any) -> None:
+        """Raise ``TypeError`` / ``ValueError`` naming ``name`` unless ``value`` lies in the interval."""
         if value is None and self.optional:
             return
         if isinstance(value, bool) or not isinstance(value, numbers.Integral if self.integer else numbers.Real):
@@ -61,9 +63,11 @@ class Choice:
     registry: Collection[str]
 
     def names(self) -> Collection[str]:
+        """The valid names, read when asked (a registry may grow after import)."""
         return self.registry
 
     def check(self, name: str, value: Any) -> None:
+        """Raise ``TypeError`` / ``ValueError`` naming ``name`` unless ``value`` is one of :meth:`names`."""
         choices = self.names()
         if not isinstance(value, str):
             raise TypeError(f"{name} must be a string, one of {sorted(choices)}; got {type(value).__name__}")
@@ -78,6 +82,7 @@ class OneOf:
     values: tuple
 
     def check(self, name: str, value: Any) -> None:
+        """Raise ``ValueError`` naming ``name`` unless ``value`` is one of ``values``."""
         if isinstance(value, bool) or value not in self.values:
             raise ValueError(f"{name} must be one of {list(self.values)}; got {value!r}")
 
@@ -87,6 +92,7 @@ class Flag:
     """A bool (``1`` / ``"yes"`` are not)."""
 
     def check(self, name: str, value: Any) -> None:
+        """Raise ``TypeError`` naming ``name`` unless ``value`` is a bool."""
         if not isinstance(value, bool):
             raise TypeError(f"{name} must be true or false; got {type(value).__name__} {value!r}")
 
@@ -118,4 +124,5 @@ class Validated:
                 raise ValueError(f"{self._group or type(self).__name__}: {message.format(c=self)}")
 
     def as_dict(self) -> dict[str, Any]:
+        """The config as a plain dict (nested configs included)."""
         return asdict(self)  # type: ignore[call-overload]

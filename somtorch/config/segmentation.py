@@ -69,7 +69,7 @@ class SOMConfig(Validated):
         rows, cols: grid size (one neuron = one segment; ``som=grid4x7`` is the paper's).
         topology: ``"rectangular"`` or ``"hexagonal"`` neighbours.
         toroidal: the grid wraps around at its edges.
-        init: initial weights (:data:`somtorch.core.init.INITS`).
+        init: initial weights (:data:`somtorch.config.options.INITS`).
     """
 
     _group: ClassVar[str] = "som"
@@ -87,7 +87,7 @@ class SOMConfig(Validated):
 
 @dataclass
 class TrainConfig(Validated):
-    """SOM training (paper step 1b); the defaults of :meth:`somtorch.SOM.fit`.
+    """SOM training (paper step 1b); the defaults of :meth:`somtorch.core.som.SOM.fit`.
 
     Attributes:
         mode: ``"batch"`` (batch map), ``"minibatch"`` or ``"online"`` (Kohonen's rule, the paper's).

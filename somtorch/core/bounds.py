@@ -13,7 +13,7 @@ return: the kernel sums ``(x_d − w_d)²`` in the weights' precision, whose rel
 (``u·(1 + ρ) + α < l·(1 − ρ)``, ``ρ = 2(D + 2)·eps``, ``α`` for underflow); the bounds are float64
 and rounded outwards after every update. A tie, or any margin the rounding could flip, fails the test
 and is searched again by the same tile kernel (lowest index on ties). The sums are added in sample
-order, so they equal :func:`native_accumulate`'s bitwise. The bounds need the kernel's per-sample
+order, so they equal :func:`~somtorch.core.native.native_accumulate`'s bitwise. The bounds need the kernel's per-sample
 determinism: elsewhere (GPU, ``SOMTORCH_NATIVE=0``) they are not used.
 
 **When they are used.** A bounded epoch pays only when nearly every search is skipped, and a

@@ -131,10 +131,12 @@ class SOM(nn.Module):
 
     @property
     def device(self) -> torch.device:
+        """The device of the weights."""
         return self.weight.device
 
     @property
     def dtype(self) -> torch.dtype:
+        """The dtype of the weights."""
         return self.weight.dtype
 
     def __setattr__(self, name: str, value: Any) -> None:
@@ -162,6 +164,7 @@ class SOM(nn.Module):
                 "dtype": str(self.dtype).removeprefix("torch.")}
 
     def extra_repr(self) -> str:
+        """The grid, feature count, ensemble size and topology, for ``repr``."""
         return (f"rows={self.rows}, cols={self.cols}, dim={self.dim}, ensemble={self.ensemble}, "
                 f"topology={self.topology!r}, toroidal={self.toroidal}")
 
@@ -243,14 +246,15 @@ class SOM(nn.Module):
             callback_every: int | None = None) -> SOM:
         """Train the maps on ``x`` and return ``self``.
 
+        The defaults of every argument are those of :class:`~somtorch.config.TrainConfig`
+        (``mode`` batch), so ``fit(x)`` trains as ``somtorch-run`` does.
+
         Args:
             x: samples ``(N, D)`` shared by all members, or ``(E, N, D)``.
             mode: ``"online"`` (Kohonen's sequential rule, one sample per step), ``"batch"`` (batch
                 map, one step per epoch) or ``"minibatch"`` (batch-map updates on ``batch_size``
                 samples with learning rate ``lr``).
             epochs: passes over the data (default :class:`~somtorch.config.TrainConfig` ``epochs``).
-            The defaults of every argument are those of :class:`~somtorch.config.TrainConfig`
-            (``mode`` batch), so ``fit(x)`` trains as ``somtorch-run`` does.
             iterations: online only: number of single-sample steps (overrides ``epochs``).
             lr, sigma: initial learning rate and neighbourhood radius (grid units, default
                 max(rows, cols)/2); scalars or per-member tensors ``(E,)``. ``lr`` is unused in batch mode.

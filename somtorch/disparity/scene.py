@@ -91,10 +91,12 @@ class Scene:
 
     @property
     def height(self) -> int:
+        """Image height ``H`` in pixels."""
         return int(self.disparity.shape[0])
 
     @property
     def width(self) -> int:
+        """Image width ``W`` in pixels."""
         return int(self.disparity.shape[1])
 
     @property

@@ -195,4 +195,5 @@ class Builder:
         return (math.cos(el) * math.sin(az), math.cos(el) * math.cos(az), math.sin(el))
 
     def layout(self, pose: Pose) -> Layout:
+        """The scene built so far (primitives, object names, light) seen from ``pose``."""
         return Layout(list(self.prims), list(self.names), pose, self.light())

@@ -89,4 +89,5 @@ class Pose:
         return np.stack([right, down, fwd], axis=1)
 
     def centre(self) -> np.ndarray:
+        """The camera centre ``(x, y, height_m)`` in world metres."""
         return np.array([self.x, self.y, self.height_m])

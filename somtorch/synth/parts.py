@@ -20,6 +20,8 @@ def _turn(x: float, y: float, yaw: float, dx: float, dy: float) -> tuple[float, 
 
 
 def person(b: Builder, x: float, y: float, yaw: float = 0.0, z0: float = 0.0, height: float | None = None) -> int:
+    """Add a standing person (legs, torso, arms, head) at ``(x, y)`` on height ``z0``, turned by ``yaw``;
+    ``height`` in metres (random 1.55-1.9 when None); return its object id."""
     r = b.rng
     h = height or r.uniform(1.55, 1.9)
     o = b.new_object("person")
@@ -36,6 +38,7 @@ def person(b: Builder, x: float, y: float, yaw: float = 0.0, z0: float = 0.0, he
 
 
 def car(b: Builder, x: float, y: float, yaw: float = 0.0) -> int:
+    """Add a car at ``(x, y)`` turned by ``yaw``; return its object id."""
     r = b.rng
     o = b.new_object("car")
     length, width = r.uniform(3.8, 4.8), r.uniform(1.65, 1.9)
@@ -52,6 +55,7 @@ def car(b: Builder, x: float, y: float, yaw: float = 0.0) -> int:
 
 
 def cyclist(b: Builder, x: float, y: float, yaw: float = 0.0) -> int:
+    """Add a cyclist (bicycle and rider) at ``(x, y)`` turned by ``yaw``; return its object id."""
     o = b.new_object("cyclist")
     frame, tyre, skin, cloth = (b.material("object"), b.material("object", "none"), b.material("skin"),
                                 b.material("object"))
@@ -69,6 +73,7 @@ def cyclist(b: Builder, x: float, y: float, yaw: float = 0.0) -> int:
 
 
 def pole(b: Builder, x: float, y: float, height: float | None = None, name: str = "pole") -> int:
+    """Add a pole (random 3-6 m when ``height`` is None) at ``(x, y)``; return its object id."""
     o = b.new_object(name)
     h = height or b.rng.uniform(3.0, 6.0)
     b.cylinder(x, y, 0.0, b.rng.uniform(0.04, 0.09), h, o, b.material("object"))
@@ -76,6 +81,7 @@ def pole(b: Builder, x: float, y: float, height: float | None = None, name: str 
 
 
 def sign(b: Builder, x: float, y: float, yaw: float = 0.0) -> int:
+    """Add a road sign (a pole with a plate) at ``(x, y)`` turned by ``yaw``; return its object id."""
     o = pole(b, x, y, b.rng.uniform(2.0, 3.0), name="sign")
     h = b.prims[-1].axes[2][2] * 2
     plate = b.material("object", "low")
@@ -88,6 +94,7 @@ def sign(b: Builder, x: float, y: float, yaw: float = 0.0) -> int:
 
 
 def tree(b: Builder, x: float, y: float) -> int:
+    """Add a tree (a trunk and a round or conical crown) at ``(x, y)``; return its object id."""
     r = b.rng
     o = b.new_object("tree")
     trunk_h, trunk_r = r.uniform(1.2, 3.5), r.uniform(0.1, 0.3)
@@ -103,6 +110,7 @@ def tree(b: Builder, x: float, y: float) -> int:
 
 
 def bush(b: Builder, x: float, y: float) -> int:
+    """Add a bush (a random ellipsoid) at ``(x, y)``; return its object id."""
     o = b.new_object("bush")
     rx, ry, rz = b.rng.uniform(0.4, 1.1), b.rng.uniform(0.4, 1.1), b.rng.uniform(0.35, 0.8)
     b.sphere((x, y, rz * 0.6), (rx, ry, rz), o, b.material("leaves"))
@@ -110,6 +118,8 @@ def bush(b: Builder, x: float, y: float) -> int:
 
 
 def bench(b: Builder, x: float, y: float, yaw: float = 0.0) -> int:
+    """Add a park bench (wooden seat and back, metal legs) at ``(x, y)`` turned by ``yaw``; return its object
+    id."""
     o = b.new_object("bench")
     wood, metal = b.material("wood"), b.material("object")
     length = b.rng.uniform(1.2, 2.0)
@@ -137,6 +147,7 @@ def table(b: Builder, x: float, y: float, size: tuple[float, float], height: flo
 
 
 def chair(b: Builder, x: float, y: float, yaw: float = 0.0) -> int:
+    """Add a chair at ``(x, y)`` turned by ``yaw``; return its object id."""
     o = b.new_object("chair")
     mat = b.material(b.rng.choice(["wood", "object"]))
     b.box_on(x, y, 0.43, (0.45, 0.45, 0.04), o, mat, yaw)

@@ -60,6 +60,8 @@ class GroundPlane:
         return self._cache[key]
 
     def as_dict(self) -> dict:
+        """The plane's coefficients, tolerance, inlier share and support flag as a dict (for
+        ``metrics.json``)."""
         return {"a": self.a, "b": self.b, "c": self.c, "tol": self.tol, "inlier_frac": self.inlier_frac,
                 "support": self.support}
 

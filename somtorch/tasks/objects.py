@@ -19,7 +19,7 @@ Selection of the kept areas:
 * ``"all"`` — every area passing the size limits.
 
 What happens to the selected areas afterwards (joining adjacent segments, box refinement, growing,
-the purity test) is in :mod:`somtorch.tasks.refine`; :func:`~somtorch.tasks.refine.kept_areas` runs
+the purity test) is in :mod:`somtorch.tasks.refine`; :func:`~somtorch.tasks.detect.kept_areas` runs
 selection and those steps in order.
 """
 
@@ -67,9 +67,12 @@ class NeuronStats:
 
     @property
     def perimeter(self) -> torch.Tensor:
+        """Boundary length of each segment with the other segments ``(K,)``."""
         return self.boundary.sum(1)
 
     def spread(self, kind: str) -> float:
+        """The disparity spread of the map in px: full range (``kind="range"``) or 5th-95th percentile
+        (``"robust"``), at least 1e-9."""
         lo, hi = self.d_range if kind == "range" else self.d_robust
         return max(hi - lo, 1e-9)
 

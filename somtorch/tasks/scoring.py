@@ -19,6 +19,18 @@ from .reduction import Reduction, reduce_map
 
 @dataclass
 class Score:
+    """One reduction scored against an object mask (see the module docstring for the terms).
+
+    Attributes:
+        identified_fraction: share of the object's valid pixels inside the kept area.
+        identified_100: all of them inside.
+        identified_95: at least 95 % inside.
+        reduction_union: reduction (%) keeping the union of the kept boxes.
+        reduction_crops: reduction (%) keeping every kept box as a separate crop (can be negative).
+        x_opt: reduction (%) of keeping exactly the object's bounding box.
+        useful_hit: identified_95 and reduction_union ≥ 0.75 · x_opt.
+    """
+
     identified_fraction: float
     identified_100: bool
     identified_95: bool
@@ -28,6 +40,7 @@ class Score:
     useful_hit: bool
 
     def as_dict(self) -> dict:
+        """The score as a plain dict."""
         return asdict(self)
 
 
