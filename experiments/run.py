@@ -14,10 +14,10 @@ Examples::
 
 from __future__ import annotations
 
-if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from .help import maybe_print_help
+if __name__ == "__main__":  # signals and --help answered before the heavy imports (torch, Hydra)
+    from .entry import start
 
-    maybe_print_help("run")
+    start("run")
 
 import dataclasses
 import logging
@@ -243,7 +243,7 @@ def main(dcfg: DictConfig) -> dict:
     configure_threads()
     from .cli import interruptible, marked_if_failed, quiet
     from .schema import one_line_errors
-    from somtorch.atomic import exclusive_folder
+    from somtorch.locks import exclusive_folder
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
 
