@@ -26,10 +26,10 @@ Writes ``validate.json`` (every per-frame figure, every decision, every fold's c
 
 from __future__ import annotations
 
-if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from .help import maybe_print_help
+if __name__ == "__main__":  # signals and --help answered before the heavy imports (torch, Hydra)
+    from .entry import start
 
-    maybe_print_help("validate")
+    start("validate")
 
 import json
 import logging
@@ -305,9 +305,10 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
         # frames in worker processes (one thread each); the scores come back, the segmentations do
         # not: a combination the choice needs later is segmented again here, deterministically
         import concurrent.futures as cf
-        import multiprocessing as mp
 
-        with cf.ProcessPoolExecutor(cfg.workers, mp_context=mp.get_context("spawn")) as pool:
+        from somtorch.interrupt import worker_pool
+
+        with worker_pool(cfg.workers) as pool:  # Ctrl-C / kill: the workers end at once
             futures = {pool.submit(_score_frame, (specs[i], base, missing[i], data_dir, 1)): i for i in todo}
             for fut in cf.as_completed(futures):
                 caches[futures[fut]].scores.update(fut.result())

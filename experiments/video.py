@@ -15,10 +15,10 @@ stage timings; the frames per second; useful hits where scored) into the Hydra r
 
 from __future__ import annotations
 
-if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from .help import maybe_print_help
+if __name__ == "__main__":  # signals and --help answered before the heavy imports (torch, Hydra)
+    from .entry import start
 
-    maybe_print_help("video")
+    start("video")
 
 import dataclasses
 import glob
