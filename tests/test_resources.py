@@ -8,7 +8,6 @@ import os
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import pytest
@@ -117,11 +116,9 @@ def test_available_memory_honours_cgroups(tmp_path):
 @pytest.mark.parametrize("override", ["ensemble=1000000", "train.epochs=1000000000"])
 def test_run_refuses_before_any_work(tmp_path, override):
     """The two runs that were OOM-killed after 80-93 s: refused at once, one line, FAILED marker."""
-    t0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-m", "experiments.run", override, f"hydra.run.dir={tmp_path}/r"],
                          capture_output=True, text=True, cwd=ROOT, timeout=120,
                          env={**os.environ, "PYTHONPATH": str(ROOT)})
-    took = time.perf_counter() - t0
     assert out.returncode == 2, out.stderr
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "resources." in lines[0], out.stderr
@@ -130,5 +127,4 @@ def test_run_refuses_before_any_work(tmp_path, override):
     assert (folder / "FAILED").exists() and not (folder / ".lock").exists()
     assert not list(folder.glob(".partial-*")) and not (folder / "metrics.json").exists()
     log_lines = (folder / "run.log").read_text().strip().splitlines()
-    assert len(log_lines) == 1 and "ResourceError" in log_lines[0]
-    assert took < 30  # the check itself takes milliseconds; the rest is starting Python and torch
+    assert len(log_lines) == 1 and "ResourceError" in log_lines[0]  # nothing ran before the refusal
