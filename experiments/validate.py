@@ -266,6 +266,11 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     specs = frames(cfg.datasets, cfg.frames)
     if not specs:
         raise ValueError(f"no frame selected (datasets={cfg.datasets}, frames={cfg.frames})")
+    from .datasets import missing_corpus
+
+    missing = missing_corpus(specs)  # a fresh clone: the generated frames are not there yet
+    if missing is not None:
+        raise FileNotFoundError(missing)
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
     grid = {k: list(v) for k, v in cfg.grid.items()}
     for k, v in cfg.neutral.items():  # a knob's neutral value is always tried
