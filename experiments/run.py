@@ -91,11 +91,11 @@ def load_input(cfg: RunConfig):
     return scene
 
 
-def check_resources(jobs, resources, what: str) -> None:
+def check_resources(jobs, resources, what: str):
     """Refuse (:class:`somtorch.resources.ResourceError`, one line) work that would need more memory or
     time than ``resources`` (a :class:`~somtorch.config.ResourcesConfig`) allows. ``jobs``: ``(scene,
     pipeline config, times)`` run one after another (peak: the largest; time: the sum); an iterable,
-    so that a long list of frames is read one at a time."""
+    so that a long list of frames is read one at a time. Returns the :class:`~somtorch.resources.Estimate`."""
     from somtorch.pipeline import resource_estimate
     from somtorch.resources import check, combine
 
@@ -103,6 +103,7 @@ def check_resources(jobs, resources, what: str) -> None:
     log.debug("%s: estimated %s", what, est.describe())
     if resources.check:
         check(est, max_memory_frac=resources.max_memory_frac, max_hours=resources.max_hours, what=what)
+    return est
 
 
 def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> dict:

@@ -258,6 +258,9 @@ def _default_of(cfg: Any, key: str) -> Any:
 
 def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     """Run the protocol of the module docstring; returns the JSON-ready report."""
+    from somtorch import interrupt
+
+    from .cli import announce
     from .datasets import frames, load_frame
     from .scenes import check_junk_kind
 
@@ -293,7 +296,10 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
             yield scene, base, upstream
             yield scene, base, len(keys)
 
-    check_resources(jobs(), cfg.resources, f"validation over {len(specs)} frames x {len(keys)} candidates")
+    what = f"{len(specs)} frames x {len(keys)} candidates"
+    est = check_resources(jobs(), cfg.resources, f"validation over {what}")
+    announce("validate", what + (f", {cfg.workers} workers" if cfg.workers > 1 else ""),
+             est.seconds / max(1, min(cfg.workers, len(specs))))
     t0 = time.perf_counter()
     resumed = json.loads(Path(cfg.resume).read_text()) if cfg.resume else {}
     progress = _progress(len(specs))
@@ -306,6 +312,7 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
         else:
             todo.append(i)
     missing = {i: [(ov, sal) for ov, sal in keys if _key(ov) not in caches[i].scores] for i in todo}
+    interrupt.note(f"after {progress.n} of {len(specs)} frames")
     if cfg.workers > 1 and len(todo) > 1:
         # frames in worker processes (one thread each); the scores come back, the segmentations do
         # not: a combination the choice needs later is segmented again here, deterministically
@@ -318,11 +325,13 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
             for fut in cf.as_completed(futures):
                 caches[futures[fut]].scores.update(fut.result())
                 progress.update(1)
+                interrupt.note(f"after {progress.n} of {len(specs)} frames")
     else:
         for i in todo:
             for ov, sal in missing[i]:
                 caches[i].score(ov, saliency=sal)
             progress.update(1)
+            interrupt.note(f"after {progress.n} of {len(specs)} frames")
     if cfg.scores_out:  # the per-frame scores, so that a later run can resume from them
         Path(cfg.scores_out).parent.mkdir(parents=True, exist_ok=True)
         Path(cfg.scores_out).write_text(json.dumps({c.spec.name: c.scores for c in caches}))
@@ -389,10 +398,10 @@ def _scorable(specs: list[Any], data_dir: Path) -> list[Any]:
 
 
 def _progress(total: int) -> Any:
-    """A progress bar over the frames (tqdm; off where stderr is not a terminal)."""
-    from tqdm import tqdm
+    """A progress bar over the frames (off with ``--quiet`` or where stderr is not a terminal)."""
+    from .cli import progress_bar
 
-    return tqdm(total=total, desc="frames", unit="frame", disable=None)
+    return progress_bar(total, "frames", "frame")
 
 
 def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]]:

@@ -119,6 +119,11 @@ def deferred() -> Iterator[None]:
 
 def _worker_start(initializer: Callable[..., Any] | None, initargs: tuple) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides, and ends the workers
+    # tqdm's default write lock is a multiprocessing semaphore: a worker terminated while it exists
+    # leaves the resource tracker a "leaked semaphore" warning; a worker shows no bars anyway
+    from tqdm.std import tqdm
+
+    tqdm.set_lock(threading.RLock())
     if initializer is not None:
         initializer(*initargs)
 

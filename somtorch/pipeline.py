@@ -25,6 +25,7 @@ from . import interrupt
 from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, PipelineConfig, ReductionConfig,
                      SOMConfig, TrainConfig)
 from .core import SOM
+from .core.threads import contended
 from .disparity.features import Features, make_features, relative_disparity
 from .disparity.scene import Scene
 from .resources import Estimate, estimate
@@ -341,7 +342,9 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     """
     cfg = cfg or PipelineConfig()
     timer = _Timer()
-    with interrupt.deferred():  # SIGINT / SIGTERM stop it between epochs, chunks, members (somtorch.interrupt)
+    # SIGINT / SIGTERM stop it between epochs, chunks, members (somtorch.interrupt); torch threads no
+    # more than the cores other processes leave free (the same bits at any count; tests/test_pipeline.py)
+    with interrupt.deferred(), contended():
         valid, ground, usable, feats, train = prepare(scene, cfg, timer)
         work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
         seg = run_segmenter(feats, train, work, usable, cfg, progress=progress, log_training=log_training,
