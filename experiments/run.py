@@ -133,8 +133,8 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     t_load = time.perf_counter() - t_start
     if cfg.object_id is not None and scene.objects is None:
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
-    check_resources([(scene, cfg, 1)], cfg.resources,
-                    f"scene {scene.name} ({scene.width}x{scene.height}, ensemble={cfg.runs})")
+    what = f"scene {scene.name} ({scene.width}x{scene.height}, ensemble={cfg.runs})"
+    log.info("%s: estimated %s", what, check_resources([(scene, cfg, 1)], cfg.resources, what).describe())
     out_dir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     writer = None

@@ -319,9 +319,15 @@ def _full_size(area: ObjectArea, s: int, h: int, w: int) -> ObjectArea:
 def resource_estimate(scene: Scene, cfg: PipelineConfig) -> Estimate:
     """Peak memory and time :func:`run_pipeline` will need on ``scene`` (:mod:`somtorch.resources`),
     from sizes only: the training pixels are counted on the stride grid of the valid mask."""
+    from .core.native import available
+
     s = train_stride(scene, cfg)
     h, w = scene.valid.shape
-    return estimate(height=h, width=w, valid=scene.n_valid, train=int(scene.valid[::s, ::s].sum()),
+    # the compiled kernels serve a CPU run where they build (the online loop: Gaussian neighbourhood
+    # only); a GPU counts as fast as they are (not measured)
+    native = not str(cfg.device).startswith("cpu") or available() and (
+        cfg.train.mode != "online" or cfg.train.neighborhood == "gaussian")
+    return estimate(height=h, width=w, valid=scene.n_valid, train=int(scene.valid[::s, ::s].sum()), native=native,
                     dim=3 + 3 * (cfg.features.color_weight > 0), units=cfg.som.rows * cfg.som.cols,
                     members=cfg.runs, epochs=cfg.train.epochs, mode=cfg.train.mode,
                     batch_size=cfg.train.batch_size, method=cfg.method, iterations=cfg.baseline.kmeans_iterations,
