@@ -256,8 +256,9 @@ def _default_of(cfg: Any, key: str) -> Any:
     return obj
 
 
-def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
-    """Run the protocol of the module docstring; returns the JSON-ready report."""
+def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any]:
+    """Run the protocol of the module docstring; returns the JSON-ready report. ``runs_log``: the
+    file the worker processes write their pipeline warnings into (:mod:`experiments.warning_log`)."""
     from somtorch import interrupt
 
     from .cli import announce
@@ -320,7 +321,10 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
 
         from somtorch.interrupt import worker_pool
 
-        with worker_pool(cfg.workers) as pool:  # Ctrl-C / kill: the workers end at once
+        from .warning_log import worker_start
+
+        start = (worker_start, (str(runs_log),)) if runs_log is not None else (None, ())
+        with worker_pool(cfg.workers, *start) as pool:  # Ctrl-C / kill: the workers end at once
             futures = {pool.submit(_score_frame, (specs[i], base, missing[i], data_dir, 1)): i for i in todo}
             for fut in cf.as_completed(futures):
                 caches[futures[fut]].scores.update(fut.result())
@@ -436,9 +440,12 @@ def main(dcfg: DictConfig) -> int:
     from somtorch.atomic import write_staged
 
     out = Path(HydraConfig.get().runtime.output_dir)
+    from .warning_log import warnings_to_file
+
     with marked_if_failed(out), interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
         cfg: ValidateConfig = OmegaConf.to_object(dcfg)
-        report = evaluate(cfg)
+        with warnings_to_file(out / "runs.log", "validate"):  # thousands of runs: their warnings in a file
+            report = evaluate(cfg, out / "runs.log")
     write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": report})
     m = report["summary"]["macro_real"]
     log.info("real macro useful-hit rate: default %.1f %%, in-sample %.1f %%, left-out %.1f %% (all-objects "
