@@ -48,14 +48,14 @@ def _count(path: Path) -> int:
 
 @contextlib.contextmanager
 def warnings_to_file(path: Path, what: str) -> Iterator[None]:
-    """Inside the block, the pipeline's warnings go to ``path``; after it, one line on stderr
-    (``what: N warnings of the scored runs (...) in path``) if there were any."""
+    """Inside the block, the pipeline's warnings go to ``path``; after it (if it ends normally), one
+    line on stderr (``what: N warnings of the scored runs (...) in path``) if there were any."""
     path.parent.mkdir(parents=True, exist_ok=True)
     before = _count(path)
     routed = _route(path)
     try:
         yield
-    finally:
+    finally:  # (an error or an interrupt says its own one line: no count then)
         for lg, handler, propagate in routed:
             lg.removeHandler(handler)
             lg.propagate = propagate

@@ -39,3 +39,15 @@ def test_no_warning_no_line(tmp_path, capsys):
     with warnings_to_file(tmp_path / "runs.log", "validate"):
         pass
     assert capsys.readouterr().err == "" and not (tmp_path / "runs.log").exists()
+
+
+def test_an_interrupted_block_leaves_the_one_line_to_the_interrupt(tmp_path, capsys):
+    import pytest
+
+    with pytest.raises(KeyboardInterrupt):
+        with warnings_to_file(tmp_path / "runs.log", "validate"):
+            _warn("before the signal")
+            raise KeyboardInterrupt
+    assert capsys.readouterr().err == ""
+    assert "before the signal" in (tmp_path / "runs.log").read_text()
+    assert logging.getLogger("somtorch.pipeline").propagate  # the routing is undone
