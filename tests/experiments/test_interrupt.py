@@ -24,11 +24,11 @@ def _wait_for(pred, timeout: float) -> bool:
     return False
 
 
-def _epoch(line: str) -> int:
-    """The epoch an ``interrupted (...) after epoch N/M`` line names."""
-    m = re.search(r"after epoch (\d+)/", line)
-    assert m, line
-    return int(m.group(1))
+def _stopped_in_training(line: str, name: str) -> bool:
+    """``line`` says the run stopped in training: at an epoch's end (``after epoch N/100000``, N short
+    of the end) or, on a machine so busy that the first epoch had not ended, in its BMU search."""
+    m = re.match(rf"interrupted \({name}\) (after epoch (\d+)/100000|during stage train); ", line)
+    return m is not None and (m.group(2) is None or 0 < int(m.group(2)) < 100000)
 
 
 def _start(args: list[str]) -> subprocess.Popen:
@@ -56,12 +56,11 @@ def test_run_stops_cleanly_on_a_signal(tmp_path, sig, code):
     lines = [ln for ln in err.strip().splitlines() if ln.strip()]
     assert len(lines) == 1, err
     name = signal.Signals(sig).name
-    assert lines[0].startswith(f"interrupted ({name}) after epoch "), lines[0]
-    assert lines[0].endswith(f"/100000; partial results not written; {folder / 'FAILED'}"), lines[0]
+    assert _stopped_in_training(lines[0], name), lines[0]  # (how long it took: benchmarks/, not a test)
+    assert lines[0].endswith(f"; partial results not written; {folder / 'FAILED'}"), lines[0]
     assert (folder / "FAILED").read_text().startswith(f"interrupted ({name})")
     assert not list(folder.glob(".partial-*")) and not (folder / ".lock").exists()
     assert not (folder / "metrics.json").exists()
-    assert 0 < _epoch(lines[0]) < 100000  # stopped in training, at an epoch's end (timings: benchmarks/)
 
 
 @pytest.mark.slow
@@ -78,6 +77,5 @@ def test_study_stops_cleanly_on_sigint(tmp_path):
         p.kill()
     assert p.returncode == 130, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
-    assert err.strip().splitlines()[-1].startswith("interrupted (SIGINT) after epoch "), err
+    assert _stopped_in_training(err.strip().splitlines()[-1], "SIGINT"), err
     assert (folder / "FAILED").exists() and not list(folder.glob(".partial-*"))
-    assert 0 < _epoch(err.strip().splitlines()[-1]) < 100000

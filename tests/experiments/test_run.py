@@ -259,7 +259,7 @@ def test_a_folder_held_by_a_run_refuses_a_second_writer(tmp_path):
 
     with exclusive_folder(tmp_path) as lock:
         assert lock.exists()
-        with pytest.raises(RuntimeError, match="being written by another run"):
+        with pytest.raises(RuntimeError, match=f"being written by the run of PID {os.getpid()} "):
             with exclusive_folder(tmp_path):
                 pass
     assert not lock.exists()
