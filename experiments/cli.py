@@ -187,15 +187,19 @@ def run_checked(main: Any, schema: type, argv: list[str] | None = None) -> Any:
     if err is not None:
         print(f"error: {err}", file=sys.stderr)
         raise SystemExit(2)
-    from somtorch.interrupt import Interrupted
+    from somtorch import interrupt
 
+    from .entry import STARTUP
+
+    interrupt.install()  # takes over from the start-up handler (experiments.entry): Interrupted, below
+    interrupt.note(STARTUP)  # until a job resets it
     try:
         return main()
-    except Interrupted as e:  # outside a job (between the jobs of a multirun): no folder to mark
+    except interrupt.Interrupted as e:  # outside a job (start-up, between the jobs of a multirun): no folder to mark
         print(f"interrupted ({e.signal_name}) {e.where or 'between jobs'}".rstrip(), file=sys.stderr)
         raise SystemExit(e.exit_code) from None
-    except KeyboardInterrupt:  # before a job installed the handler (start-up)
-        print("interrupted (SIGINT) during start-up", file=sys.stderr)
+    except KeyboardInterrupt:  # a handler of a library replaced ours
+        print(f"interrupted (SIGINT) {STARTUP}", file=sys.stderr)
         raise SystemExit(130) from None
 
 
@@ -212,6 +216,23 @@ def show_progress() -> bool:
     import os
 
     return not quiet() and os.environ.get("SOMTORCH_PROGRESS") != "0" and sys.stderr.isatty()
+
+
+def announce(command: str, jobs: str, seconds: float | None) -> None:
+    """One line on stderr before a long command starts (unless ``--quiet``): what it will do and
+    the estimated time (``somtorch.resources``), e.g. ``validate: 9 frames x 14 candidates, estimated ~3.2 min``."""
+    from somtorch.resources import fmt_seconds
+
+    est = "no time estimate" if seconds is None else f"estimated ~{fmt_seconds(seconds)} (rough: from the sizes)"
+    if not quiet():
+        print(f"{command}: {jobs}, {est}", file=sys.stderr, flush=True)
+
+
+def progress_bar(total: int, desc: str, unit: str) -> Any:
+    """A tqdm bar over the ``total`` units of a command, shown where :func:`show_progress` says."""
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, disable=not show_progress(), dynamic_ncols=True)
 
 
 def launcher_jobs() -> int:

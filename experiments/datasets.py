@@ -25,7 +25,7 @@ from . import CONF  # the clone's conf/, or the one shipped in the wheel
 REGISTRY = CONF / "datasets.yaml"
 LABELS = CONF / "labels"
 
-__all__ = ["DatasetSpec", "FrameSpec", "corpus_dir", "datasets", "frames", "load_frame"]
+__all__ = ["DatasetSpec", "FrameSpec", "corpus_dir", "datasets", "frames", "load_frame", "missing_corpus"]
 
 
 @dataclass(frozen=True)
@@ -204,6 +204,31 @@ def frames(datasets: list[str] | None = None, names: list[str] | None = None, *,
             and (synthetic is None or f.synthetic == synthetic)]
 
 
+def missing_corpus(specs: list[FrameSpec], corpus: str | Path | None = None) -> str | None:
+    """One line naming the synthetic frames of ``specs`` not generated yet and the command that
+    generates them (``somtorch-synth``), or None when every one is there."""
+    root = Path(corpus or corpus_dir())
+    missing = [s for s in specs if s.synthetic and not (root / s.folder).is_dir()]
+    if not missing:
+        return None
+    from .synth_config import SynthConfig
+
+    fams, cams = {}, {}  # ordered sets
+    seeds = 0
+    for s in missing:
+        fam_cam, seed = s.folder.split("/")
+        fam, cam = fam_cam.rsplit("_", 1)
+        fams[fam], cams[cam], seeds = None, None, max(seeds, int(seed) + 1)
+    args = [] if sorted(fams) == sorted(SynthConfig().families) else [f"'families=[{','.join(fams)}]'"]
+    args += [f"'cameras=[{','.join(cams)}]'", f"n={seeds}"]
+    if root != corpus_dir():
+        args.append(f"cache={root}")
+    frames_ = len({s.folder for s in missing})
+    return (f"{frames_} synthetic frame(s) are not generated yet (in {root}); generate them first with "
+            f"`somtorch-synth {' '.join(args)}` (`python -m experiments.synth ...` in a clone), or leave the "
+            "synthetic datasets out (datasets=[...])")
+
+
 def load_frame(spec: FrameSpec, data_dir: str | Path, corpus: str | Path | None = None) -> Any:
     """The :class:`~somtorch.disparity.scene.Scene` of ``spec``, named ``spec.name``, with its objects.
 
@@ -221,7 +246,6 @@ def load_frame(spec: FrameSpec, data_dir: str | Path, corpus: str | Path | None 
 
     folder = Path(corpus or corpus_dir()) / spec.folder
     if not folder.is_dir():
-        raise FileNotFoundError(f"synthetic frame {spec.name!r}: {folder} does not exist; build the corpus "
-                                "with `python -m experiments.synth` (see README)")
+        raise FileNotFoundError(f"synthetic frame {spec.name!r}: {missing_corpus([spec], corpus)}")
     scene = load_scene(folder) if spec.disparity == "gt" else load_scene(folder, disparity_file=spec.disparity)
     return dataclasses.replace(scene, name=spec.name)

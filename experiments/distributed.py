@@ -92,7 +92,7 @@ def _run(cfg, cfg_dict, dist) -> int:
     from hydra.utils import to_absolute_path
 
     from .run import execute, load_input
-    from somtorch.atomic import exclusive_folder
+    from somtorch.locks import exclusive_folder
     from somtorch.pipeline import run_pipeline
 
     rank, world = dist.get_rank(), dist.get_world_size()

@@ -27,10 +27,10 @@ against the union of the labelled objects, :mod:`somtorch.saliency_metrics`), me
 
 from __future__ import annotations
 
-if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from .help import maybe_print_help
+if __name__ == "__main__":  # signals and --help answered before the heavy imports (torch, Hydra)
+    from .entry import start
 
-    maybe_print_help("real_scenes")
+    start("real_scenes")
 
 import logging
 import time
@@ -175,6 +175,13 @@ def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
         raise ValueError("methods=[]: name at least one method (som or a task baseline)")
     check_methods(cfg.methods)
     scenes = [load_frame(s, data_dir) for s in specs]  # every file checked before any training
+    from somtorch.pipeline import resource_estimate
+
+    from .cli import announce, progress_bar
+
+    som_s = sum(resource_estimate(scene, cfg).seconds for scene in scenes) if "som" in cfg.methods else 0.0
+    announce("scenes", f"{len(scenes)} scenes x {len(cfg.methods)} method(s)", som_s)
+    bar = progress_bar(len(scenes) * len(cfg.methods), "scenes", "run")
     rows = []
     for spec, scene in zip(specs, scenes):
         for method in cfg.methods:
@@ -190,13 +197,16 @@ def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
                 runs = run_baseline(method, scene, cfg.reduction)
                 if runs is None:
                     log.info("%s: %s skipped (no metric camera)", spec.name, method)
+                    bar.update()
                     continue
                 row = {**head, "mode": "all pixels", "deterministic": get_task_baseline(method).deterministic,
                        **score_scene(scene, runs, cfg)}
             row["wall_s"] = time.perf_counter() - t0
             rows.append(row)
+            bar.update()
             log.info("%s [%s]: %s", spec.name, method, ", ".join(
                 f"{k} {row[k]}" for k in ("useful_hits", "all_objects_hits", "low_solidity", "no_object") if k in row))
+    bar.close()
     return {"schema": SCHEMA, "label": cfg.label, "datasets": cfg.datasets, "rows": rows,
             "config": OmegaConf.to_container(OmegaConf.structured(cfg))}
 
@@ -238,15 +248,15 @@ def to_markdown(results: dict[str, Any]) -> str:
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="real_scenes")
 def main(dcfg: DictConfig) -> dict:
-    from .cli import configure_threads
+    from .cli import configure_threads, interruptible, marked_if_failed
 
     configure_threads()
     from .schema import one_line_errors
     from somtorch.atomic import write_staged
 
-    with one_line_errors(log):
+    out = Path(HydraConfig.get().runtime.output_dir)
+    with marked_if_failed(out), interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
         cfg: ScenesConfig = OmegaConf.to_object(dcfg)
-        out = Path(HydraConfig.get().runtime.output_dir)
         results = evaluate(cfg)
     write_staged(out, {"results.md": to_markdown(results).encode(), "metrics.json": results})
     log.info("tables in %s", out / "results.md")

@@ -14,10 +14,10 @@ Examples::
 
 from __future__ import annotations
 
-if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from .help import maybe_print_help
+if __name__ == "__main__":  # signals and --help answered before the heavy imports (torch, Hydra)
+    from .entry import start
 
-    maybe_print_help("run")
+    start("run")
 
 import dataclasses
 import logging
@@ -91,11 +91,11 @@ def load_input(cfg: RunConfig):
     return scene
 
 
-def check_resources(jobs, resources, what: str) -> None:
+def check_resources(jobs, resources, what: str):
     """Refuse (:class:`somtorch.resources.ResourceError`, one line) work that would need more memory or
     time than ``resources`` (a :class:`~somtorch.config.ResourcesConfig`) allows. ``jobs``: ``(scene,
     pipeline config, times)`` run one after another (peak: the largest; time: the sum); an iterable,
-    so that a long list of frames is read one at a time."""
+    so that a long list of frames is read one at a time. Returns the :class:`~somtorch.resources.Estimate`."""
     from somtorch.pipeline import resource_estimate
     from somtorch.resources import check, combine
 
@@ -103,6 +103,7 @@ def check_resources(jobs, resources, what: str) -> None:
     log.debug("%s: estimated %s", what, est.describe())
     if resources.check:
         check(est, max_memory_frac=resources.max_memory_frac, max_hours=resources.max_hours, what=what)
+    return est
 
 
 def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> dict:
@@ -132,8 +133,8 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     t_load = time.perf_counter() - t_start
     if cfg.object_id is not None and scene.objects is None:
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
-    check_resources([(scene, cfg, 1)], cfg.resources,
-                    f"scene {scene.name} ({scene.width}x{scene.height}, ensemble={cfg.runs})")
+    what = f"scene {scene.name} ({scene.width}x{scene.height}, ensemble={cfg.runs})"
+    log.info("%s: estimated %s", what, check_resources([(scene, cfg, 1)], cfg.resources, what).describe())
     out_dir.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out_dir))
     writer = None
@@ -243,7 +244,7 @@ def main(dcfg: DictConfig) -> dict:
     configure_threads()
     from .cli import interruptible, marked_if_failed, quiet
     from .schema import one_line_errors
-    from somtorch.atomic import exclusive_folder
+    from somtorch.locks import exclusive_folder
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
 

@@ -22,10 +22,10 @@ same command skips every job whose ``metrics.json`` is complete and was made by 
 
 from __future__ import annotations
 
-if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from .help import maybe_print_help
+if __name__ == "__main__":  # signals and --help answered before the heavy imports (torch, Hydra)
+    from .entry import start
 
-    maybe_print_help("study")
+    start("study")
 
 import dataclasses
 import json
@@ -108,7 +108,19 @@ def complete_metrics(path: Path, chash: str) -> dict | None:
 
 
 def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str, Any]:
-    """Run one study job into ``out_dir`` (see the module docstring); returns its metrics."""
+    """Run one study job into ``out_dir`` (see the module docstring); returns its metrics.
+
+    The job holds its folder (:func:`somtorch.locks.exclusive_folder`): a second study into the same
+    output root that reaches a job the first is running waits for it, then skips it (its
+    ``metrics.json`` is complete) or, if the first failed, runs it. No job runs twice at once.
+    """
+    from somtorch.locks import exclusive_folder
+
+    with exclusive_folder(out_dir, wait=True):
+        return _execute(cfg, out_dir, config)
+
+
+def _execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str, Any]:
     import torch
 
     from somtorch import __version__

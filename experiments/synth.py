@@ -13,10 +13,10 @@ Writes ``n`` frames (seeds ``start .. start + n - 1``) per family x camera into
 
 from __future__ import annotations
 
-if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from .help import maybe_print_help
+if __name__ == "__main__":  # signals and --help answered before the heavy imports (torch, Hydra)
+    from .entry import start
 
-    maybe_print_help("synth")
+    start("synth")
 
 import logging
 import time
@@ -56,11 +56,11 @@ def _make(family: str, camera: str, seed: int, scale: float, root: str) -> dict:
 
 def generate(cfg: SynthConfig, progress: bool = True) -> dict:
     """Generate the missing or stale frames of ``cfg``; a summary (counts, seconds, per-camera rates)."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from multiprocessing import get_context
+    from concurrent.futures import as_completed
 
     from tqdm.auto import tqdm
 
+    from somtorch.interrupt import worker_pool
     from somtorch.synth import CAMERAS, FAMILIES
     from somtorch.synth.store import cache_root, dataset_dir, is_current, read_manifest, write_manifest
     from somtorch.validation import check_choice
@@ -84,7 +84,7 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
     log.info("%d of %d frames to generate into %s (%d present)", len(todo), total, root, total - len(todo))
     t0, seconds = time.perf_counter(), {}
     if todo:
-        with ProcessPoolExecutor(cfg.workers, mp_context=get_context("spawn"), initializer=_init_worker) as ex:
+        with worker_pool(cfg.workers, initializer=_init_worker) as ex:  # Ctrl-C / kill: the workers end at once
             jobs = {ex.submit(_make, fam, cam, s, cfg.scale, root): (fam, cam, s) for fam, cam, s in todo}
             for fut in tqdm(as_completed(jobs), total=len(jobs), unit="frame", disable=not progress):
                 fam, cam, s = jobs[fut]

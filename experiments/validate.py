@@ -26,10 +26,10 @@ Writes ``validate.json`` (every per-frame figure, every decision, every fold's c
 
 from __future__ import annotations
 
-if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from .help import maybe_print_help
+if __name__ == "__main__":  # signals and --help answered before the heavy imports (torch, Hydra)
+    from .entry import start
 
-    maybe_print_help("validate")
+    start("validate")
 
 import json
 import logging
@@ -263,8 +263,12 @@ def _default_of(cfg: Any, key: str) -> Any:
     return obj
 
 
-def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
-    """Run the protocol of the module docstring; returns the JSON-ready report."""
+def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any]:
+    """Run the protocol of the module docstring; returns the JSON-ready report. ``runs_log``: the
+    file the worker processes write their pipeline warnings into (:mod:`experiments.warning_log`)."""
+    from somtorch import interrupt
+
+    from .cli import announce
     from .datasets import frames, load_frame
     from .scenes import check_junk_kind
 
@@ -276,6 +280,11 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     specs = frames(cfg.datasets, cfg.frames)
     if not specs:
         raise ValueError(f"no frame selected (datasets={cfg.datasets}, frames={cfg.frames})")
+    from .datasets import missing_corpus
+
+    missing = missing_corpus(specs)  # a fresh clone: the generated frames are not there yet
+    if missing is not None:
+        raise FileNotFoundError(missing)
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
     grid = {k: list(v) for k, v in cfg.grid.items()}
     for k, v in cfg.neutral.items():  # a knob's neutral value is always tried
@@ -298,7 +307,10 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
             yield scene, base, upstream
             yield scene, base, len(keys)
 
-    check_resources(jobs(), cfg.resources, f"validation over {len(specs)} frames x {len(keys)} candidates")
+    what = f"{len(specs)} frames x {len(keys)} candidates"
+    est = check_resources(jobs(), cfg.resources, f"validation over {what}")
+    announce("validate", what + (f", {cfg.workers} workers" if cfg.workers > 1 else ""),
+             est.seconds / max(1, min(cfg.workers, len(specs))))
     t0 = time.perf_counter()
     resumed = json.loads(Path(cfg.resume).read_text()) if cfg.resume else {}
     progress = _progress(len(specs))
@@ -311,22 +323,29 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
         else:
             todo.append(i)
     missing = {i: [(ov, sal) for ov, sal in keys if _key(ov) not in caches[i].scores] for i in todo}
+    interrupt.note(f"after {progress.n} of {len(specs)} frames")
     if cfg.workers > 1 and len(todo) > 1:
         # frames in worker processes (one thread each); the scores come back, the segmentations do
         # not: a combination the choice needs later is segmented again here, deterministically
         import concurrent.futures as cf
-        import multiprocessing as mp
 
-        with cf.ProcessPoolExecutor(cfg.workers, mp_context=mp.get_context("spawn")) as pool:
+        from somtorch.interrupt import worker_pool
+
+        from .warning_log import worker_start
+
+        start = (worker_start, (str(runs_log),)) if runs_log is not None else (None, ())
+        with worker_pool(cfg.workers, *start) as pool:  # Ctrl-C / kill: the workers end at once
             futures = {pool.submit(_score_frame, (specs[i], base, missing[i], data_dir, 1)): i for i in todo}
             for fut in cf.as_completed(futures):
                 caches[futures[fut]].scores.update(fut.result())
                 progress.update(1)
+                interrupt.note(f"after {progress.n} of {len(specs)} frames")
     else:
         for i in todo:
             for ov, sal in missing[i]:
                 caches[i].score(ov, saliency=sal)
             progress.update(1)
+            interrupt.note(f"after {progress.n} of {len(specs)} frames")
     if cfg.scores_out:  # the per-frame scores, so that a later run can resume from them
         Path(cfg.scores_out).parent.mkdir(parents=True, exist_ok=True)
         Path(cfg.scores_out).write_text(json.dumps({c.spec.name: c.scores for c in caches}))
@@ -398,10 +417,10 @@ def _scorable(specs: list[Any], data_dir: Path) -> list[Any]:
 
 
 def _progress(total: int) -> Any:
-    """A progress bar over the frames (tqdm; off where stderr is not a terminal)."""
-    from tqdm import tqdm
+    """A progress bar over the frames (off with ``--quiet`` or where stderr is not a terminal)."""
+    from .cli import progress_bar
 
-    return tqdm(total=total, desc="frames", unit="frame", disable=None)
+    return progress_bar(total, "frames", "frame")
 
 
 def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]]:
@@ -436,9 +455,12 @@ def main(dcfg: DictConfig) -> int:
     from somtorch.atomic import write_staged
 
     out = Path(HydraConfig.get().runtime.output_dir)
+    from .warning_log import warnings_to_file
+
     with marked_if_failed(out), interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
         cfg: ValidateConfig = OmegaConf.to_object(dcfg)
-        report = evaluate(cfg)
+        with warnings_to_file(out / "runs.log", "validate"):  # thousands of runs: their warnings in a file
+            report = evaluate(cfg, out / "runs.log")
     write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": report})
     m = report["summary"]["macro_real"]
     log.info("real macro useful-hit rate: default %.1f %%, in-sample %.1f %%, left-out %.1f %% (all-objects "

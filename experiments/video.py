@@ -15,10 +15,10 @@ stage timings; the frames per second; useful hits where scored) into the Hydra r
 
 from __future__ import annotations
 
-if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
-    from .help import maybe_print_help
+if __name__ == "__main__":  # signals and --help answered before the heavy imports (torch, Hydra)
+    from .entry import start
 
-    maybe_print_help("video")
+    start("video")
 
 import dataclasses
 import glob
@@ -140,15 +140,19 @@ def main(dcfg: DictConfig) -> dict:
 
 def _run_frames(cfg: VideoConfig, runner, frames, n: int, rows: list, pictures) -> dict:
     """Every frame through ``runner`` (a row of ``rows`` each, its picture into ``pictures``); the summary."""
+    from .cli import announce, progress_bar
     from .run import check_resources
     from somtorch import interrupt
 
     s = cfg.sequence
+    bar = progress_bar(n, "frames", "frame")
     for i, scene in enumerate(frames):
         if i == 0:  # every frame has the size of the first: a cold frame, then warm ones
             warm = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, epochs=s.warm_epochs))
-            check_resources([(scene, cfg, 1), (scene, warm if s.warm else cfg, n - 1)], cfg.resources,
-                            f"sequence of {n} frames of {scene.width}x{scene.height}")
+            what = f"{n} frames of {scene.width}x{scene.height}"
+            est = check_resources([(scene, cfg, 1), (scene, warm if s.warm else cfg, n - 1)], cfg.resources,
+                                  f"sequence of {what}")
+            announce("video", what, est.seconds)
         interrupt.checkpoint(f"after frame {i}/{n}")
         r = runner.step(scene)
         pictures.add(r.index, scene, r.members[0])
@@ -157,6 +161,8 @@ def _run_frames(cfg: VideoConfig, runner, frames, n: int, rows: list, pictures) 
                      "kept_boxes": [list(a.box) for a in m.kept], "reduction_union": m.reduction.reduction_union,
                      "no_object": m.no_object, "useful_hit": None if m.score is None else m.score.useful_hit,
                      "timings_ms": {k: 1e3 * v for k, v in r.timings.items()}})
+        bar.update()
+    bar.close()
     per = [sum(r["timings_ms"].values()) for r in rows[1:]] or [sum(rows[0]["timings_ms"].values())]
     scored = [r["useful_hit"] for r in rows if r["useful_hit"] is not None]
     return {"frames": len(rows), "median_ms_per_frame": statistics.median(per),

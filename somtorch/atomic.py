@@ -64,24 +64,6 @@ def commit_staged(stage: str | os.PathLike, out_dir: str | os.PathLike, last: st
         os.replace(entry, target)
 
 
-@contextlib.contextmanager
-def exclusive_folder(folder: str | os.PathLike, name: str = ".lock") -> Iterator[Path]:
-    """Hold ``folder/name`` (created exclusively) while the block runs: a second writer of the same
-    folder fails at once with a clear error instead of overwriting the first one's results."""
-    path = Path(folder) / name
-    try:
-        fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-    except FileExistsError:
-        raise RuntimeError(f"{folder} is being written by another run (lock file {path}); give this run its "
-                           "own folder (hydra.run.dir=...) or remove the lock if no run is alive") from None
-    try:
-        os.write(fd, str(os.getpid()).encode())
-        os.close(fd)
-        yield path
-    finally:
-        path.unlink(missing_ok=True)
-
-
 def write_staged(out_dir: str | os.PathLike, files: dict[str, bytes | Any], last: str | None = None) -> None:
     """Write ``{name: bytes or JSON-ready object}`` into ``out_dir`` through a staging folder, the
     last entry of ``files`` (or ``last``) moved in last: a killed writer leaves no partial result."""

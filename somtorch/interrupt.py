@@ -10,6 +10,12 @@ its output folder and exit with ``128 + signal`` (130 for SIGINT, 143 for SIGTER
 
 Without :func:`install` (the library used from Python) nothing changes: Ctrl-C raises
 ``KeyboardInterrupt`` as usual, and :func:`checkpoint` costs one attribute read.
+
+:func:`worker_pool` is the process pool of the commands that farm work out (``somtorch-validate``,
+``somtorch-synth``, tiled runs): its workers leave SIGINT to the parent (a terminal's Ctrl-C reaches
+the whole process group), and a signal or an error in the parent cancels the queued jobs and
+ends the workers at once, instead of waiting for every pending job (``ProcessPoolExecutor``'s
+``with`` block) and leaving idle workers behind.
 """
 
 from __future__ import annotations
@@ -17,9 +23,13 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["Interrupted", "checkpoint", "deferred", "install", "note", "requested", "reset"]
+if TYPE_CHECKING:
+    from concurrent.futures import ProcessPoolExecutor
+
+__all__ = ["Interrupted", "checkpoint", "deferred", "install", "note", "requested", "reset", "worker_pool"]
 
 
 class Interrupted(BaseException):
@@ -107,3 +117,44 @@ def deferred() -> Iterator[None]:
     finally:
         _state.defer -= 1
     checkpoint()  # a signal that came after the region's last checkpoint
+
+
+def _worker_start(initializer: Callable[..., Any] | None, initargs: tuple) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides, and ends the workers
+    # tqdm's default write lock is a multiprocessing semaphore: a worker terminated while it exists
+    # leaves the resource tracker a "leaked semaphore" warning; a worker shows no bars anyway
+    from tqdm.std import tqdm
+
+    tqdm.set_lock(threading.RLock())
+    if initializer is not None:
+        initializer(*initargs)
+
+
+@contextlib.contextmanager
+def worker_pool(workers: int, initializer: Callable[..., Any] | None = None,
+                initargs: tuple = ()) -> Iterator[ProcessPoolExecutor]:
+    """A ``ProcessPoolExecutor`` of ``workers`` spawned processes that an exception in the block
+    (:class:`Interrupted`, ``KeyboardInterrupt``, an error) ends at once: the queued jobs are
+    cancelled and the workers terminated (SIGTERM, then SIGKILL after 5 s) before it propagates.
+    The workers ignore SIGINT. A block that ends normally waits for its jobs, as usual."""
+    from concurrent.futures import ProcessPoolExecutor
+    from functools import partial
+    from multiprocessing import get_context
+
+    pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"),
+                               initializer=partial(_worker_start, initializer, tuple(initargs)))
+    try:
+        yield pool
+    except BaseException:
+        procs = list((getattr(pool, "_processes", None) or {}).values())  # no public handle on them
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        for p in procs:
+            p.join(5)
+            if p.is_alive():
+                p.kill()
+                p.join()
+        raise
+    pool.shutdown(wait=True)

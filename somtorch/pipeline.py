@@ -25,6 +25,7 @@ from . import interrupt
 from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, PipelineConfig, ReductionConfig,
                      SOMConfig, TrainConfig)
 from .core import SOM
+from .core.threads import contended
 from .disparity.features import Features, make_features, relative_disparity
 from .disparity.scene import Scene
 from .resources import Estimate, estimate
@@ -340,9 +341,15 @@ def _full_size(area: ObjectArea, s: int, h: int, w: int) -> ObjectArea:
 def resource_estimate(scene: Scene, cfg: PipelineConfig) -> Estimate:
     """Peak memory and time :func:`run_pipeline` will need on ``scene`` (:mod:`somtorch.resources`),
     from sizes only: the training pixels are counted on the stride grid of the valid mask."""
+    from .core.native import available
+
     s = train_stride(scene, cfg)
     h, w = scene.valid.shape
-    return estimate(height=h, width=w, valid=scene.n_valid, train=int(scene.valid[::s, ::s].sum()),
+    # the compiled kernels serve a CPU run where they build (the online loop: Gaussian neighbourhood
+    # only); a GPU counts as fast as they are (not measured)
+    native = not str(cfg.device).startswith("cpu") or available() and (
+        cfg.train.mode != "online" or cfg.train.neighborhood == "gaussian")
+    return estimate(height=h, width=w, valid=scene.n_valid, train=int(scene.valid[::s, ::s].sum()), native=native,
                     dim=3 + 3 * (cfg.features.color_weight > 0), units=cfg.som.rows * cfg.som.cols,
                     members=cfg.runs, epochs=cfg.train.epochs, mode=cfg.train.mode,
                     batch_size=cfg.train.batch_size, method=cfg.method, iterations=cfg.baseline.kmeans_iterations,
@@ -363,7 +370,9 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     """
     cfg = cfg or PipelineConfig()
     timer = _Timer()
-    with interrupt.deferred():  # SIGINT / SIGTERM stop it between epochs, chunks, members (somtorch.interrupt)
+    # SIGINT / SIGTERM stop it between epochs, chunks, members (somtorch.interrupt); torch threads no
+    # more than the cores other processes leave free (the same bits at any count; tests/test_pipeline.py)
+    with interrupt.deferred(), contended():
         valid, ground, usable, feats, train = prepare(scene, cfg, timer)
         work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
         seg = run_segmenter(feats, train, work, usable, cfg, progress=progress, log_training=log_training,

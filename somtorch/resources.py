@@ -27,8 +27,10 @@ hold more than ~150 MB (labelling- and object-step-bound); the training term ove
 current batch engine (a shared neighbourhood table) several-fold on large grids.
 
 Times are typical, not bounds (per-element costs fitted on one thread of a 2-core CPU with the
-native kernel; a study's jobs come out at 0.6-2x their measured time): they refuse the absurd
-(``train.epochs=1000000000``), not the merely long, and give a sweep its time estimate.
+native kernel; a study's jobs come out at 0.6-2x their measured time; without the kernel — no
+compiler, ``SOMTORCH_NATIVE=0`` — the torch path's own costs, 50-100x higher, fitted on a loaded
+machine): they refuse the absurd (``train.epochs=1000000000``), not the merely long, and give a
+sweep its time estimate. Ground plane and features are not counted (0.1-0.2 s a scene, unloaded).
 """
 
 from __future__ import annotations
@@ -51,8 +53,17 @@ _BLOCK = 4096  # somtorch.core.training.BLOCK_STEPS
 # one thread each; estimate / measured per job: docs/scaling.md §11)
 _T_BATCH = 7e-11  # per member x training pixel x neuron, one epoch of the batch map
 _T_KK = 5e-10  # per member x neuron², one batch-map update (neighbourhood product)
-_T_ONLINE = 1.2e-9  # per member x step x neuron, online rule (members in vector lanes)
-_T_STEP = 1e-7  # per step, the schedule and the kernel's per-step work
+_T_ONLINE = 1.5e-9  # per member x step x neuron, online rule (members in vector lanes)
+_T_STEP = 3e-7  # per step, the schedule and the kernel's per-step work
+# the online rule without the compiled loop (no C++ compiler, SOMTORCH_NATIVE=0, a neighbourhood
+# other than the Gaussian, a GPU): a few torch calls per step from Python. Measured 2026-12-03
+# under a load average of 9 on the 2 cores: 47-80 us a step for one member of 64 neurons,
+# 132 us for 10 members of 256 (SOM.fit); the issue-34 trial: 57 s for 1000 epochs of 2,800 steps
+_T_STEP_TORCH = 2e-5  # per step
+_T_ONLINE_TORCH = 1e-8  # per member x step x neuron
+# the batch map without the fused kernel (distances, argmin and sums in torch): 33 ms an epoch of
+# 20 members x 2,800 pixels x 64 neurons, measured 2026-12-03 under a load average of 10
+_T_BATCH_TORCH = 8e-9  # per member x training pixel x neuron, one epoch
 _T_EPOCH = 2.5e-4  # per batch-map epoch: schedule, kernel launches, the update
 _T_LABEL = 3e-10  # per member x pixel x neuron, BMU labelling
 _T_ERRORS = 4.5e-8  # per member x training pixel, quantization and topographic errors (top-2 BMUs)
@@ -96,7 +107,7 @@ class Estimate:
 
 def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, units: int = 64, members: int = 1,
              epochs: int = 10, mode: str = "batch", batch_size: int = 256, map_stride: int = 1,
-             method: str = "som", iterations: int = 20, metrics: bool = True) -> Estimate:
+             method: str = "som", iterations: int = 20, metrics: bool = True, native: bool = True) -> Estimate:
     """Predicted peak memory and time of one pipeline call (see the module docstring).
 
     Args:
@@ -107,6 +118,8 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
         method: the segmenter (``som``, ``minisom``, ``kmeans``, ``slic``, ``felzenszwalb``).
         iterations: k-means iterations.
         metrics: the quantization and topographic errors are computed (``run_pipeline(metrics=True)``).
+        native: the compiled kernels serve the training (``somtorch.core.native``: the online
+            loop, the batch map's fused search and sums); False: the torch path, 50-100x slower.
 
     >>> e = estimate(height=500, width=741, valid=343_274, train=1_979, members=400, map_stride=2)
     >>> 1.6 < e.peak_bytes / 2**30 < 2.5  # measured: 1.6 GiB
@@ -126,7 +139,7 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
             # unit distances (somtorch.core.bounds): an upper bound, 5-30x the measured peak of the
             # shared-table engine on a 32 x 32 grid (tests/test_resources.py)
             train_b = weights + e * k * k * 4 * 3
-            train_s = epochs * (e * nt * k * _T_BATCH + e * k * k * _T_KK + _T_EPOCH)
+            train_s = epochs * (e * nt * k * (_T_BATCH if native else _T_BATCH_TORCH) + e * k * k * _T_KK + _T_EPOCH)
         elif mode == "minibatch":
             steps = max(1, epochs * nt // batch_size)
             train_b = weights + e * k * k * 4 * 3 + e * nt * 8 + e * batch_size * d * 4
@@ -134,7 +147,8 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
         else:  # online: one block of S steps' samples and schedule values per member
             s = min(_BLOCK, epochs * nt)
             train_b = weights + e * nt * 8 + e * s * (d + 2) * 4 + e * k * d * 4
-            train_s = epochs * nt * (_T_STEP + e * k * _T_ONLINE)
+            train_s = epochs * nt * ((_T_STEP + e * k * _T_ONLINE) if native else
+                                     (_T_STEP_TORCH + e * k * _T_ONLINE_TORCH))
         if method == "minisom":
             train_s = e * epochs * nt * _T_MINISOM
         train_b += min(e * nt * k, _CHUNK) * 4 * 3  # one chunk of distances (and its argmin)

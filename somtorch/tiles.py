@@ -25,14 +25,13 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from multiprocessing import get_context
 
 import torch
 
 from .config import PipelineConfig
 from .disparity.scene import Scene
+from .interrupt import worker_pool
 from .tasks.objects import disparity_spread
 from .tasks.reduction import Reduction, reduce_map
 from .tasks.scoring import Score, optimal_reduction, score_reduction
@@ -188,7 +187,7 @@ def run_tiled(scene: Scene, cfg: PipelineConfig | None = None, *, tiles: tuple[i
     windows = tile_windows(h, w, tiles, overlap)
     jobs = [(crop_scene(scene, *win, with_objects=False), cfg, k) for k, win in enumerate(windows)]
     if workers > 0:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        with worker_pool(workers) as pool:  # an error or a signal here ends the workers at once
             done = list(pool.map(_tile_job, jobs))
     else:
         done = [_tile_job(j) for j in jobs]

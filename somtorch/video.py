@@ -29,6 +29,7 @@ import torch
 
 from .config import PipelineConfig, WarmStartConfig
 from .core import SOM
+from .core.threads import contended
 from .disparity.scene import Scene
 from .pipeline import MemberResult, _Timer, detect, map_stride, on_support, prepare
 from .segmenters import Segmentation, _from_prototypes, run_segmenter
@@ -103,7 +104,15 @@ class SequenceRunner:
         return g, False
 
     def step(self, scene: Scene) -> FrameResult:
-        """Run one frame (the pipeline's own stages; only training starts from the last frame)."""
+        """Run one frame (the pipeline's own stages; only training starts from the last frame).
+
+        On as many torch threads as other processes leave cores free (:func:`~somtorch.core.threads.contended`;
+        the same bits at any count): on a busy 2-core machine two threads made a frame 7x slower.
+        """
+        with contended():
+            return self._step(scene)
+
+    def _step(self, scene: Scene) -> FrameResult:
         cfg, timer, reused = self.cfg, _Timer(), [False]
 
         def ground_fn(valid: torch.Tensor) -> GroundPlane | None:

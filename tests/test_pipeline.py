@@ -348,3 +348,27 @@ def test_many_calls_warn_once_about_kept_everything(caplog):
     assert flagged >= 2 and per_call == flagged  # the setting does trigger the warning, run after run
     assert len(caplog.records) == 1 and "of 4 runs" in caplog.records[0].getMessage()
     assert counts[2] == 4 and counts[0] + counts[1] == flagged
+
+
+def test_the_thread_count_never_changes_a_result(motorcycle, monkeypatch):
+    """run_pipeline and the video runner run on the cores other processes leave free
+    (``somtorch.core.threads.contended``): the same bits whatever torch's thread count is."""
+    from somtorch.disparity.resize import resize_scene
+    from somtorch.video import SequenceRunner, pan_sequence
+
+    before, out = torch.get_num_threads(), {}
+    big = resize_scene(motorcycle, 790, 450)
+    try:
+        for n in (1, 2):
+            monkeypatch.setenv("SOMTORCH_THREADS", str(n))  # explicit: what torch is set to, loaded machine or not
+            torch.set_num_threads(n)
+            r = run_pipeline(motorcycle, PipelineConfig(ensemble=3))
+            runner = SequenceRunner(PipelineConfig(), warm=True)
+            frames = [runner.step(f) for f in pan_sequence(big, 632, 360, 3)]
+            out[n] = (r.labels, r.ref_disparity, [[a.box for a in m.kept] for m in r.members],
+                      [m.reduction.reduction_union for m in r.members],
+                      [([a.box for a in f.members[0].kept], f.members[0].reduction.reduction_union) for f in frames])
+    finally:
+        torch.set_num_threads(before)
+    assert torch.equal(out[1][0], out[2][0]) and torch.equal(out[1][1], out[2][1])
+    assert out[1][2:] == out[2][2:]

@@ -301,6 +301,29 @@ def _blocks(total: int, size: int, every: int | None) -> Iterator[tuple[int, int
         start = stop
 
 
+HEARTBEAT_S = 60.0  # a training without a bar (a log file, --quiet) logs its progress this often
+
+
+class _Heartbeat:
+    """Logs (INFO) how far a long training got, at most every :data:`HEARTBEAT_S` seconds."""
+
+    def __init__(self, desc: str, steps: int, where: Callable[[int], str]) -> None:
+        import time
+
+        self.desc, self.steps, self.where, self.clock = desc, steps, where, time.monotonic
+        self.t0 = self.clock()
+        self.next = self.t0 + HEARTBEAT_S
+
+    def __call__(self, done: int) -> None:
+        now = self.clock()
+        if now < self.next or done <= 0:
+            return
+        self.next = now + HEARTBEAT_S
+        spent = now - self.t0
+        log.info("%s: %s, %.0f s so far, ~%.0f s left", self.desc, self.where(done), spent,
+                 spent * (self.steps - done) / done)
+
+
 def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int, batch_size: int,
         order: Order, sched: Schedules, grid_d2: torch.Tensor, neighborhood: NeighborhoodFn,
         progress: bool = True, callback: Callback | None = None, callback_every: int | None = None,
@@ -332,6 +355,8 @@ def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int
     skipped: list[float] = []
     bar = tqdm(total=steps, desc=desc, unit="step", disable=not progress, delay=0.5, leave=False)
     epochs_total = planned * per_step / n
+    beat = _Heartbeat(desc, steps, lambda done: f"epoch {_epochs((offset + done) * per_step / n)} of "
+                                                f"{_epochs(epochs_total)}")
     try:
         with torch.no_grad(), interrupt.deferred():  # a signal stops the loop at the next block's end
             for start, stop in _blocks(steps, block, cut_every if callback is not None else None):
@@ -352,6 +377,8 @@ def run(weight: torch.Tensor, x: torch.Tensor | Chunks, *, mode: str, steps: int
                 bar.update(stop - start)
                 interrupt.checkpoint(f"after epoch {_epochs((offset + stop) * per_step / n)}/"
                                      f"{_epochs(epochs_total)}")
+                if not progress:
+                    beat(stop)
                 if every:
                     fire = stop % every == 0
                 else:  # once per completed epoch

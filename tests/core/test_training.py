@@ -172,3 +172,22 @@ def test_partial_fit_guards_its_schedule():
     assert som.epochs_done == 1
     som.fit(x, epochs=1, progress=False)
     assert som.epochs_done == 0
+
+
+@pytest.mark.parametrize("mode", ["online", "batch"])
+def test_a_training_without_a_bar_logs_its_progress(mode, monkeypatch, caplog):
+    """Issue 34: a long run into a log file printed nothing while it worked (the bar is for a terminal)."""
+    import logging
+
+    import somtorch.core.training as training
+
+    monkeypatch.setattr(training, "HEARTBEAT_S", 0.0)  # every block (every epoch of the batch map)
+    x = torch.rand(500, 3, generator=torch.Generator().manual_seed(0))
+    with caplog.at_level(logging.INFO, logger="somtorch.core.training"):
+        SOM(3, 3, 3, seed=0).fit(x, mode=mode, epochs=4, progress=False)
+    beats = [r.getMessage() for r in caplog.records if "s so far" in r.getMessage()]
+    assert beats and beats[-1].startswith("SOM") and " of 4, " in beats[-1], beats
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="somtorch.core.training"):
+        SOM(3, 3, 3, seed=0).fit(x, mode=mode, epochs=4, progress=True)  # a bar: no log lines
+    assert not [r for r in caplog.records if "s so far" in r.getMessage()]

@@ -97,7 +97,8 @@ def _job(tmp_path: Path, last: str) -> Path:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sig, code, group", [(signal.SIGINT, 130, True), (signal.SIGTERM, 143, False)])
+@pytest.mark.parametrize("sig, code, group", [(signal.SIGINT, 130, True), (signal.SIGINT, 130, False),
+                                               (signal.SIGTERM, 143, False)])
 def test_a_signal_stops_every_worker_and_marks_their_folders(tmp_path, sig, code, group):
     p = _sweep(tmp_path, *LONG)
     try:
@@ -108,7 +109,7 @@ def test_a_signal_stops_every_worker_and_marks_their_folders(tmp_path, sig, code
         assert len(_workers(p.pid)) == 2
         if group:  # Ctrl-C in a terminal: the whole process group
             os.killpg(p.pid, sig)
-        else:  # kill <pid>: the launcher alone, which stops its workers
+        else:  # kill [-INT] <pid>: the launcher alone, which stops its workers
             p.send_signal(sig)
         _, err = p.communicate(timeout=90)
     finally:

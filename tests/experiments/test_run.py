@@ -255,11 +255,11 @@ def test_two_runs_started_together_keep_both_results(tmp_path):
 
 
 def test_a_folder_held_by_a_run_refuses_a_second_writer(tmp_path):
-    from somtorch.atomic import exclusive_folder
+    from somtorch.locks import exclusive_folder
 
     with exclusive_folder(tmp_path) as lock:
         assert lock.exists()
-        with pytest.raises(RuntimeError, match="being written by another run"):
+        with pytest.raises(RuntimeError, match=f"being written by the run of PID {os.getpid()} "):
             with exclusive_folder(tmp_path):
                 pass
     assert not lock.exists()

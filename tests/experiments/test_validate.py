@@ -279,3 +279,25 @@ def test_an_unknown_transform_fails_before_any_work(tmp_path):
     assert proc.returncode != 0
     assert "unknown junk kind 'rotate'" in proc.stderr + proc.stdout
     assert not (tmp_path / "validate.json").exists()
+
+
+def test_a_fresh_clone_is_told_the_command_that_generates_the_missing_frames(tmp_path, monkeypatch):
+    """Issue 34: validate on a fresh clone (no generated corpus) names the exact generator command."""
+    from experiments.datasets import missing_corpus
+    from experiments.synth_config import SynthConfig
+
+    monkeypatch.setenv("SOMTORCH_CORPUS", str(tmp_path))
+    specs = frames()
+    line = missing_corpus(specs)
+    assert line is not None and "\n" not in line
+    assert line.startswith("144 synthetic frame(s) are not generated yet")
+    cmd = line.split("`")[1]
+    assert cmd == "somtorch-synth 'cameras=[oakd,kitti,middlebury]' n=6"
+    cfg = SynthConfig(cameras=["oakd", "kitti", "middlebury"], n=6)  # what those overrides give
+    for s in specs:  # every frame the registry wants is one that command writes
+        if s.synthetic:
+            fam, cam = s.folder.split("/")[0].rsplit("_", 1)
+            (tmp_path / s.folder).mkdir(parents=True, exist_ok=True)
+            assert fam in cfg.families and cam in cfg.cameras and int(s.folder.split("/")[1]) < cfg.n
+    assert missing_corpus(specs) is None
+    assert missing_corpus(frames(datasets=["kitti2015"])) is None  # real frames never need it

@@ -3,7 +3,7 @@
 Each case mutates a small valid file (flipped and inserted bytes, truncation, spliced chunks, text
 headers with huge or non-numeric values, random bytes) and calls the reader. It must return a valid
 result or raise a documented error — a ``ValueError`` / ``OSError`` (``DataFileError`` is both a
-``SomtorchError`` and a ``ValueError``) whose message names the file — within a time bound. The
+``SomtorchError`` and a ``ValueError``) whose message names the file (no time bound: timings belong in benchmarks/). The
 normal suite runs ``FUZZ_CASES`` cases per reader (default 2,000); ``pytest -m fuzz`` runs 20,000.
 """
 
@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import random
-import time
 from pathlib import Path
 
 import cv2
@@ -30,7 +29,6 @@ from somtorch.disparity.loading import load_scene
 from somtorch.disparity.stereo import SGBMParams, load_stereo_pair
 
 CASES = int(os.environ.get("FUZZ_CASES", 2000))
-TIME_BOUND_S = 2.0
 
 
 def _seeds(tmp: Path) -> dict[str, Path]:
@@ -154,8 +152,7 @@ def _fuzz(kind: str, cases: int, tmp_path: Path, monkeypatch) -> dict[str, int]:
     for case in range(cases):
         data = _mutate(original, rng)
         seed_file.write_bytes(data)
-        t0 = time.perf_counter()
-        try:
+        try:  # no time bound: a loaded CI machine is not a failing reader
             out = READERS[kind](seed_file)
         except (ValueError, OSError) as e:
             assert seed_file.name in str(e), f"case {case}: {type(e).__name__} without the file name: {e}"
@@ -165,7 +162,6 @@ def _fuzz(kind: str, cases: int, tmp_path: Path, monkeypatch) -> dict[str, int]:
         else:
             _check_result(kind, out)
             counts["ok"] += 1
-        assert time.perf_counter() - t0 < TIME_BOUND_S, f"{kind} case {case} took too long"
     seed_file.write_bytes(original)
     assert counts["ok"] + counts["error"] == cases
     return counts
