@@ -14,10 +14,7 @@ from typing import Any
 log = logging.getLogger("mkdocs.hooks.somtorch")
 
 # page -> [(link target as written, the target it means)]
-MENDED_LINKS: dict[str, list[tuple[str, str]]] = {
-    # written relative to the repository root; from docs/method.md it resolves to docs/docs/...
-    "method.md": [("docs/tuned_constants.md", "tuned_constants.md")],
-}
+MENDED_LINKS: dict[str, list[tuple[str, str]]] = {}
 
 
 def on_page_markdown(markdown: str, *, page: Any, **kwargs: Any) -> str:
