@@ -98,7 +98,7 @@ def run_records(scene, result, obj_mask, per_run_s: list[float] | None) -> dict[
         "seed", "identified_fraction", "identified_100", "identified_95", "useful_hit", "reduction_union",
         "reduction_crops", "kept_areas", "area_px", "area_frac", "area_precision", "segment_precision",
         "segment_recall", "segment_f1", "n_areas", "quantization_error", "topographic_error", "runtime_s",
-        "no_object", "fallback", "all_objects_hit", "ground_object_frac")}
+        "no_object", "all_objects_hit", "ground_object_frac")}
     everything = all_objects(scene) if obj_mask is not None else None
     ground_frac = ground_object_share(result.ground, scene) if obj_mask is not None else None
     t = result.timings
@@ -122,7 +122,6 @@ def run_records(scene, result, obj_mask, per_run_s: list[float] | None) -> dict[
         runs["topographic_error"].append(te if te == te else None)
         runs["runtime_s"].append(per_run_s[e] if per_run_s is not None else shared + own)
         runs["no_object"].append(m.no_object)
-        runs["fallback"].append(m.fallback)
         if obj_mask is not None:
             s = m.score
             obj = obj_mask & scene.valid
@@ -179,8 +178,6 @@ def summarize_runs(runs: dict[str, list], x_opt: float | None) -> dict[str, Any]
         out["ground_object_frac"] = runs["ground_object_frac"][0]
     if "no_object" in runs:
         out["no_object"] = int(sum(runs["no_object"]))
-    if "fallback" in runs:
-        out["fallback"] = int(sum(runs["fallback"]))
     return out
 
 

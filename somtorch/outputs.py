@@ -51,7 +51,6 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "reduction_union": m.reduction.reduction_union,
             "reduction_crops": m.reduction.reduction_crops,
             "no_object": m.no_object,
-            "fallback": m.fallback,
             "kept_everything": m.reduction.reduction_union < 1.0,
             "score": m.score.as_dict() if m.score is not None else None,
         })

@@ -54,7 +54,6 @@ class MemberResult:
     score: Score | None
     stats: NeuronStats
     no_object: bool = False  # nothing convincing was found: the whole map is kept
-    fallback: bool = False  # objects.link=continuity found nothing; the contrast rule decided
 
 
 @dataclass
@@ -241,7 +240,7 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
                              integral=integral)
         score = score_reduction(red, obj_mask, scene.valid, x_opt=x_opt) if obj_mask is not None else None
         members.append(MemberResult(seg.seeds[e], found.areas, found.kept, red, score, found.stats,
-                                    found.no_object, found.fallback))
+                                    found.no_object))
     _warn_fallbacks(scene.name, members)
     return members
 

@@ -72,7 +72,7 @@ def test_the_paper_preset_pins_every_value_that_differs_from_the_default():
 
 @pytest.mark.parametrize("cls, kwargs, words", [
     (AreaConfig, {"min_purity": 2.0}, ["objects.min_purity", "[0, 1]", "2.0"]),
-    (AreaConfig, {"select": "largest"}, ["objects.select", "largest", "all, geometric, nearest, salient"]),
+    (AreaConfig, {"select": "largest"}, ["objects.select", "largest", "all, nearest, salient"]),
     (AreaConfig, {"connectivity": 6}, ["objects.connectivity", "[4, 8]"]),
     (AreaConfig, {"min_area_frac": 0.8}, ["min_area_frac < max_area_frac"]),
     (GroundConfig, {"max_below_frac": -0.1}, ["ground.max_below_frac"]),

@@ -101,22 +101,10 @@ class AreaConfig(Validated):
         spread: ``"range"`` (d_max − d_min, the paper's) or ``"robust"`` (5th–95th percentile).
         min_boundary: two segments touch if their common boundary is at least this share of the
             shorter of their two perimeters.
-        continuous_frac: ``link="continuity"``: two touching segments are linked when at least this
-            share of the pixel pairs along their common boundary have a small disparity step —
-            ``|Δd| ≤ max(step_px, step_frac · d)`` (one surface running on across the boundary); no
-            similarity of the segments' mean disparities is asked. When no candidate passes the
-            checks, the image link with the salient rank decides instead (flagged ``fallback``).
-        step_frac, step_px: that step bound.
-        join_continuous: ``merge`` also joins an adjacent segment whose boundary with the area is
-            at least ``continuous_frac`` continuous in depth, whatever its mean disparity.
-        coherent: a segment straddling a depth edge (its inner discontinuous pixel pairs at least
-            ``min_boundary`` of its perimeter) links by the similarity rule instead.
 
     Selection — which areas are kept:
         select: ``"nearest"`` (largest mean disparity, the paper's), ``"salient"`` (ranked by
-            contrast to the surrounding segments × ``area_frac ** size_power``), ``"geometric"``
-            (those in front of their surroundings ranked by ``area_frac`` × nearness × the share of
-            their outline not on the image frame) or ``"all"``.
+            contrast to the surrounding segments × ``area_frac ** size_power``) or ``"all"``.
         size_power: weight of the area's size in the salient ranking (0 = contrast alone).
         max_area_frac, min_area_frac: size limits as shares of the map's valid pixels (the ground
             plane's included: an object may be all that the ground cut leaves, a staircase on a
@@ -159,7 +147,6 @@ class AreaConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice(options.LINKS),
         "spread": Choice(options.SPREADS), "min_boundary": NON_NEGATIVE,
-        "continuous_frac": FRACTION, "step_frac": NON_NEGATIVE, "step_px": NON_NEGATIVE, "coherent": BOOL, "join_continuous": BOOL,
         "size_power": NON_NEGATIVE, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
@@ -179,11 +166,6 @@ class AreaConfig(Validated):
     link: str = "image"
     spread: str = "robust"
     min_boundary: float = 0.1
-    continuous_frac: float = 0.5
-    step_frac: float = 0.05
-    step_px: float = 1.0
-    coherent: bool = False
-    join_continuous: bool = False
     size_power: float = 0.25
     grow_stride: int = 2
     map_stride: int = 2

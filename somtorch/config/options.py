@@ -24,8 +24,8 @@ D_MODES = ("raw", "plane_residual")  # FeatureConfig.d_mode (applied by somtorch
 # somtorch.tasks.ground
 GROUND_RULES = ("position", "support", "either")
 # somtorch.tasks.objects
-SELECTIONS = ("nearest", "salient", "geometric", "all")
-LINKS = ("grid", "image", "both", "continuity")
+SELECTIONS = ("nearest", "salient", "all")
+LINKS = ("grid", "image", "both")
 SPREADS = ("range", "robust")
 # somtorch.segmenters: name -> deterministic (one run whatever ``ensemble`` says)
 METHODS: dict[str, bool] = {"som": False, "minisom": False, "kmeans": False, "slic": True, "felzenszwalb": True}

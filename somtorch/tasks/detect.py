@@ -75,7 +75,6 @@ class ObjectResult:
     areas: list[ObjectArea]
     kept: list[ObjectArea]
     no_object: bool = False
-    fallback: bool = False  # link="continuity" found nothing; the contrast rule (image link) kept these
 
 
 def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
@@ -87,25 +86,18 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
         ``grid_d2`` ``(K, K)`` or None.
     """
     cfg = cfg or AreaConfig()
-    step = (cfg.step_frac, cfg.step_px) if cfg.link == "continuity" or cfg.join_continuous else None
-    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread, step=step)
+    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread)
     n_valid = int(ctx.valid.sum())
     areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, n_valid=n_valid)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:
         return ObjectResult(stats, areas, kept)
-    if cfg.link == "continuity":  # the boundaries said nothing convincing: the SOM's contrast rule decides
-        plain = replace(cfg, link="image", select="salient")
-        areas = find_object_areas(ref_disparity, grid_d2, stats, plain, n_valid=n_valid)
-        kept = kept_areas(areas, stats, labels, plain, ctx)
-        if kept:
-            return ObjectResult(stats, areas, kept, fallback=True)
     # nothing convincing: keep the whole map rather than nothing
     ys, xs = ctx.valid.nonzero(as_tuple=True)
     box = (int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())) if ys.numel() else (0, 0, -1, -1)
     whole = ObjectArea(sorted({int(v) for v in labels.unique().tolist()} - {-1}), int(ctx.valid.sum()), box,
                        float(torch.masked_select(ctx.disparity, ctx.valid).mean()) if ys.numel() else 0.0, 0.0, 1.0, 0, confidence=0.0)
-    return ObjectResult(stats, areas, [whole], no_object=True, fallback=cfg.link == "continuity")
+    return ObjectResult(stats, areas, [whole], no_object=True)
 
 
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
@@ -148,7 +140,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             break
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
                                 max_area_frac=cfg.max_area_frac, exclude=taken,
-                                total=n_valid, continuous_frac=cfg.continuous_frac if cfg.join_continuous else None)[0]
+                                total=n_valid)[0]
         done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                           stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
                           clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)

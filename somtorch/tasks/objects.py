@@ -46,12 +46,6 @@ class NeuronStats:
         boundary: image-space boundary length between segments ``(K, K)`` (4-connected pixel pairs).
         d_range: (min, max) disparity of the map.
         d_robust: (5th, 95th) percentile of the disparity of the map.
-        continuous: of those pixel pairs, the ones whose disparity step is small
-            (:func:`continuous_step`) ``(K, K)``: a surface running on across the boundary; None when
-            not computed.
-        frame: pixels of each segment on the image frame (first / last row and column) ``(K,)``.
-        inner_edge: pixel pairs *inside* each segment across which the disparity is not continuous
-            ``(K,)``: a segment that straddles a depth edge has a line of them; None when not computed.
         perimeter: boundary length of each segment with other segments ``(K,)``.
     """
 
@@ -61,9 +55,6 @@ class NeuronStats:
     boundary: torch.Tensor
     d_range: tuple[float, float]
     d_robust: tuple[float, float]
-    continuous: torch.Tensor | None = None
-    frame: torch.Tensor | None = None
-    inner_edge: torch.Tensor | None = None
 
     @property
     def perimeter(self) -> torch.Tensor:
@@ -95,8 +86,6 @@ class ObjectArea:
     solidity: float | None = None  # share of its pixels an opening keeps (refine.solidity), in [0, 1]
     solidity_rel: float | None = None  # that share over the map's own (what objects.min_solidity tests)
     confidence: float | None = None  # rank score relative to the best candidate's (1 = best)
-    nearness: float = 1.0  # mean disparity over the map's 95th percentile
-    frame_contact: float = 0.0  # share of its outline on the image frame (vs. other segments)
 
     def mask(self, labels: torch.Tensor) -> torch.Tensor:
         """The area's pixels: the union of its neurons' segments. ``labels`` ``(H, W)`` → ``(H, W)`` bool."""
@@ -129,22 +118,8 @@ def disparity_spread(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[tupl
     return (float(d.min()), float(d.max())), (lo_q, hi_q)
 
 
-def continuous_step(d_a: torch.Tensor, d_b: torch.Tensor, step_frac: float, step_px: float) -> torch.Tensor:
-    """Whether the disparity step between neighbouring pixels is small enough for one surface to run
-    on across it: ``|d_a − d_b| ≤ max(step_px, step_frac · max(d_a, d_b))``. Relative to d, because a
-    surface slanted in depth (a floor, a ramp, a car's side) steps by an amount that grows with its
-    disparity, and so does the noise of a stereo matcher; ``step_px`` covers the sub-pixel
-    quantisation of far surfaces.
-
-    Shape:
-        ``d_a``, ``d_b`` any (same) shape → bool of that shape.
-    """
-    return (d_a - d_b).abs() <= torch.clamp(step_frac * torch.maximum(d_a, d_b), min=step_px)
-
-
 def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int, *,
-                 spread: tuple[tuple[float, float], tuple[float, float]] | None = None,
-                 step: tuple[float, float] | None = None) -> NeuronStats:
+                 spread: tuple[tuple[float, float], tuple[float, float]] | None = None) -> NeuronStats:
     """Statistics of the segments of one label map.
 
     Every statistic comes from one pass over the map: bincounts on labels, on (row, label) and
@@ -153,9 +128,6 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     Args:
         spread: :func:`disparity_spread` of ``disparity`` over ``labels >= 0`` if already known
             (computed here otherwise).
-        step: ``(step_frac, step_px)`` of :func:`continuous_step`: also count, per pair of segments,
-            the boundary pixel pairs across which the disparity is continuous
-            (:attr:`NeuronStats.continuous`); None skips it.
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 invalid), ``disparity`` ``(H, W)``.
@@ -182,12 +154,9 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     box[:, 1] = torch.where(rows, ar_h, h).amin(0)
     box[:, 2] = torch.where(cols, ar_w, -1).amax(0)
     box[:, 3] = torch.where(rows, ar_h, -1).amax(0)
-    pairs, smooth = [], []
-    for (a, b), (da, db) in (((lab[:, :-1], lab[:, 1:]), (disparity[:, :-1], disparity[:, 1:])),
-                             ((lab[:-1, :], lab[1:, :]), (disparity[:-1, :], disparity[1:, :]))):
+    pairs = []
+    for a, b in ((lab[:, :-1], lab[:, 1:]), (lab[:-1, :], lab[1:, :])):
         pairs.append((a * (k + 1) + b).reshape(-1))
-        if step is not None:
-            smooth.append(continuous_step(da, db, *step).reshape(-1))
     flat = torch.cat(pairs)  # (P,) pair keys: every 4-connected pixel pair, horizontal then vertical
 
     def symmetric(counts: torch.Tensor) -> torch.Tensor:
@@ -196,17 +165,8 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
         return m + m.T
 
     boundary = symmetric(torch.bincount(flat, minlength=(k + 1) ** 2))
-    edge = torch.zeros(h, w, dtype=torch.bool)  # the image frame: first and last row and column
-    edge[0], edge[-1], edge[:, 0], edge[:, -1] = True, True, True, True
-    frame = torch.bincount(lab[edge], minlength=k + 1)[:k].double()
-    continuous = inner = None
-    if step is not None:  # pairs with an invalid pixel carry key K and drop out of the (K, K) block
-        smooth_all = torch.cat(smooth)
-        continuous = symmetric(torch.bincount(flat[smooth_all], minlength=(k + 1) ** 2))
-        same = torch.bincount(flat[~smooth_all], minlength=(k + 1) ** 2).view(k + 1, k + 1)
-        inner = same.diagonal()[:k].double()
     d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
-    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, continuous, frame, inner)
+    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust)
 
 
 def _components(adj: torch.Tensor) -> list[list[int]]:
@@ -248,17 +208,15 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
     """
     cfg = cfg or AreaConfig()
     ref = ref_disparity.double().cpu()
-    link = cfg.link if grid_d2 is not None or cfg.link == "continuity" else "image"
-    if link == "continuity":
-        adj = continuity_links(stats, cfg)
-    else:
-        tau = cfg.similarity * stats.spread(cfg.spread)
-        reach = 1.0 + 1e-6 if cfg.connectivity == 4 else 2.0 + 1e-6
-        if grid_d2 is not None:
-            near = grid_d2.cpu() <= reach
-        if link != "grid":
-            near = _touching(stats, cfg.min_boundary) if link == "image" else near | _touching(stats, cfg.min_boundary)
-        adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
+    link = cfg.link if grid_d2 is not None else "image"
+    tau = cfg.similarity * stats.spread(cfg.spread)
+    reach = 1.0 + 1e-6 if cfg.connectivity == 4 else 2.0 + 1e-6
+    if grid_d2 is not None:
+        near = grid_d2.cpu() <= reach
+    if link != "grid":
+        touch = _touching(stats, cfg.min_boundary)
+        near = touch if link == "image" else near | touch
+    adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
     adj.fill_diagonal_(False)
     return areas_of(_components(adj), stats, total=n_valid)
 
@@ -267,32 +225,6 @@ def _touching(stats: NeuronStats, min_boundary: float) -> torch.Tensor:
     """``(K, K)`` bool: the common boundary is at least ``min_boundary`` of the shorter perimeter."""
     per = stats.perimeter.clamp_min(1.0)
     return stats.boundary >= min_boundary * torch.minimum(per[:, None], per[None, :])
-
-
-def continuity_links(stats: NeuronStats, cfg: AreaConfig) -> torch.Tensor:
-    """Pairs of segments one surface runs across: they touch (a common boundary of at least
-    ``cfg.min_boundary`` of the shorter perimeter) and at least ``cfg.continuous_frac`` of the pixel
-    pairs along that boundary have a small disparity step (:attr:`NeuronStats.continuous`). A
-    staircase, a ramp, a floor or a car's side is continuous at every segment boundary while its
-    segments' mean disparities differ step by step; an object in front of its background is not.
-
-    Returns:
-        ``(K, K)`` bool, symmetric.
-    """
-    if stats.continuous is None:
-        raise ValueError("objects.link='continuity' needs the boundary statistics: call neuron_stats(..., step=...)")
-    share = stats.continuous / stats.boundary.clamp_min(1.0)
-    touch = _touching(stats, cfg.min_boundary)
-    links = touch & (share >= cfg.continuous_frac)
-    if not cfg.coherent:
-        return links
-    # a segment that straddles a depth edge (an inner edge at least min_boundary of its perimeter)
-    # says nothing about continuity: its pairs link by the similarity rule instead
-    torn = stats.inner_edge >= cfg.min_boundary * stats.perimeter.clamp_min(1.0)
-    either = torn[:, None] | torn[None, :]
-    ref = torch.nan_to_num(stats.mean_d.double())
-    similar = (ref[:, None] - ref[None, :]).abs() < cfg.similarity * stats.spread(cfg.spread)
-    return torch.where(either, touch & similar, links)
 
 
 def areas_of(comps: list[list[int]], stats: NeuronStats, *, total: float | None = None) -> list[ObjectArea]:
@@ -317,17 +249,13 @@ def areas_of(comps: list[list[int]], stats: NeuronStats, *, total: float | None 
     x1 = torch.where(member, stats.box[None, :, 2], -1).amax(1)
     y1 = torch.where(member, stats.box[None, :, 3], -1).amax(1)
     total = float(total) if total else float(stats.count.sum())
-    frame = onehot @ stats.frame if stats.frame is not None else torch.zeros_like(mean)
-    contact = frame / (frame + b_len).clamp_min(1.0)
-    d_hi = max(stats.d_robust[1], 1e-9)
     areas = []
     for i, comp in enumerate(comps):
         n = float(n_px[i])
         if n == 0:
             continue
         areas.append(ObjectArea(comp, int(n), (int(x0[i]), int(y0[i]), int(x1[i]), int(y1[i])), float(mean[i]),
-                                float(contrast[i]), n / total, nearness=float(mean[i]) / d_hi,
-                                frame_contact=float(contact[i])))
+                                float(contrast[i]), n / total))
     return areas
 
 
@@ -338,7 +266,7 @@ def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | 
         ranked = sorted(areas, key=lambda a: -a.mean_disparity)[:1]
     else:
         ok = [a for a in areas if cfg.min_area_frac <= a.area_frac <= cfg.max_area_frac]
-        if cfg.select in ("salient", "geometric"):
+        if cfg.select == "salient":
             ok = [a for a in ok if a.contrast >= 0]  # in front of its surroundings, or not salient
             ranked = sorted(ok, key=lambda a: -rank_score(a, cfg))
         else:
@@ -350,10 +278,5 @@ def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | 
 
 
 def rank_score(area: ObjectArea, cfg: AreaConfig) -> float:
-    """The rank score of a candidate: ``"salient"``: ``contrast × area_frac ** size_power``;
-    ``"geometric"``: ``area_frac × nearness × (1 − frame_contact)`` — big, near, and not running
-    out of the image (a wall or the floor at the frame's edge runs out of it; an object in view
-    does not)."""
-    if cfg.select == "geometric":
-        return area.area_frac * area.nearness * (1.0 - area.frame_contact)
+    """The salient ranking's score: ``contrast × area_frac ** size_power``."""
     return area.contrast * area.area_frac ** cfg.size_power

@@ -27,7 +27,7 @@ _D = AreaConfig  # the defaults of the helpers below are those of the config
 
 def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float = _D.merge,
                    min_boundary: float = _D.min_boundary, max_area_frac: float = 1.0, exclude: torch.Tensor | None = None,
-                   total: float | None = None, continuous_frac: float | None = None) -> list[ObjectArea]:
+                   total: float | None = None) -> list[ObjectArea]:
     """Join to each kept area the segments that are other parts of the same object (``AreaConfig.merge``).
 
     A segment (one neuron's pixels) joins if it touches the growing group in the image (their common
@@ -41,8 +41,6 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
 
     ``exclude`` ``(K,)`` bool marks segments that may not join (those of areas kept already);
     ``total``: the pixels ``area_frac`` and ``max_area_frac`` are shares of (default: the segmented ones).
-    ``continuous_frac``: a segment also joins when at least this share of its boundary with the group
-    is continuous in depth (:attr:`NeuronStats.continuous`), whatever its mean disparity.
 
     Returns:
         the kept areas in rank order; a grown area lists all its neurons, the union of the segment
@@ -65,10 +63,7 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
         similar = (mean_d - a.mean_disparity).abs() <= ratio * max(a.contrast, 0.0)
         while True:
             shared = stats.boundary[:, group].sum(1)
-            joins = similar
-            if continuous_frac is not None and stats.continuous is not None:
-                joins = similar | (stats.continuous[:, group].sum(1) >= continuous_frac * shared)
-            ring = ~group & ~taken & joins & (shared > 0) & (shared >= min_boundary * per)
+            ring = ~group & ~taken & similar & (shared > 0) & (shared >= min_boundary * per)
             if not bool(ring.any()) or float(stats.count[group | ring].sum()) > max_area_frac * total:
                 break
             group |= ring

@@ -249,7 +249,7 @@ def test_area_config_rejects_bad_values(kwargs):
 
 
 def test_area_config_error_lists_the_valid_selections():
-    with pytest.raises(ValueError, match="all, geometric, nearest, salient"):
+    with pytest.raises(ValueError, match="all, nearest, salient"):
         AreaConfig(select="largest")
 
 
