@@ -21,6 +21,8 @@ USAGE = {
     "real_scenes": "the pipeline (and baselines) scored on named development scenes",
     "video": "a disparity sequence, each frame's SOM warm-started",
     "synth": "generated stereo frames (GT + SGBM) into the cache (docs/synth.md)",
+    "ground_report": "the ground step alone under two ground configs, side by side (a Markdown table)",
+    "synth_gallery": "one picture per family of the synthetic generator (docs/gallery/)",
 }
 
 
@@ -47,7 +49,9 @@ def _descriptions(cls: type | str | None) -> dict[str, str]:
     return {k: re.split(r"(?<=\.)\s", v, maxsplit=1)[0] for k, v in out.items()}
 
 
-def _fields(cls: type, prefix: str) -> list[str]:
+def _fields(cls: type, prefix: str, instance: object = None) -> list[str]:
+    """``  prefix.key=default  — description`` of every leaf field of ``cls`` (defaults read from
+    ``instance`` where given: a field whose default is a configured instance of ``cls``)."""
     import typing
 
     lines = []
@@ -56,7 +60,7 @@ def _fields(cls: type, prefix: str) -> list[str]:
     for f in dataclasses.fields(cls):
         if f.name.startswith("_") or dataclasses.is_dataclass(hints.get(f.name)):
             continue
-        default = f.default if f.default is not dataclasses.MISSING else (
+        default = getattr(instance, f.name) if instance is not None else f.default if f.default is not dataclasses.MISSING else (
             f.default_factory() if f.default_factory is not dataclasses.MISSING else "???")
         d = desc.get(f.name, "")
         lines.append(f"  {prefix}{f.name}={default!r}" + (f"  — {d}" if d else ""))
@@ -119,6 +123,25 @@ def _own_fields(module: str) -> list[tuple[str, str, str]]:
     return fields(own[0], "") if own else []
 
 
+def _tool_help(module: str, argv0: str | None) -> str:
+    """The help of a command that is not a pipeline run: its schema's keys, nested ones by prefix."""
+    import typing
+
+    from .synth_config import SynthConfig
+    from .tool_configs import GroundReportConfig, SynthGalleryConfig
+
+    cls = {"synth": SynthConfig, "ground_report": GroundReportConfig, "synth_gallery": SynthGalleryConfig}[module]
+    lines = [f"{prog(module, argv0)} [key=value ...]", f"  {USAGE[module]}", "", f"Keys ({cls.__name__}):"]
+    lines += _fields(cls, "")
+    hints, desc = typing.get_type_hints(cls), _descriptions(cls)
+    for f in dataclasses.fields(cls):
+        sub = hints.get(f.name)
+        if dataclasses.is_dataclass(sub):
+            lines += ["", f"{f.name}.* ({sub.__name__}): {desc.get(f.name, '')}"]
+            lines += _fields(sub, f.name + ".", f.default_factory())  # type: ignore[misc]
+    return "\n".join(lines)
+
+
 def help_text(name: str, argv0: str | None = None) -> str:
     from somtorch import config as C
 
@@ -127,11 +150,8 @@ def help_text(name: str, argv0: str | None = None) -> str:
 
     groups = config_groups()
     module = "real_scenes" if name == "scenes" else name
-    if module == "synth":  # not a pipeline run: its own keys only
-        from .synth_config import SynthConfig
-
-        return "\n".join([f"{prog(module, argv0)} [key=value ...]", f"  {USAGE['synth']}", "",
-                          "Keys (SynthConfig):"] + _fields(SynthConfig, ""))
+    if module in ("synth", "ground_report", "synth_gallery"):  # not a pipeline run: its own keys only
+        return _tool_help(module, argv0)
     lines = [f"{prog(module, argv0)} [group=option ...] [key=value ...]",
              f"  {USAGE.get(module, '')}", "",
              "Config groups (group=option; '+preset=paper' and '+experiment=...' add one):"]

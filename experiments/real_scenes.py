@@ -15,11 +15,12 @@ and ``results.md`` into the Hydra run folder, both staged and moved in only when
     python -m experiments.real_scenes 'frames=[kitti_est,motorcycle_q_sgbm,eth3d_terrace_sgbm,flyingthings3d_sgbm]'
     python -m experiments.real_scenes 'datasets=[oakd]' objects.min_solidity=0
     python -m experiments.real_scenes +preset=paper
-    python -m experiments.real_scenes 'methods=[som,uv_disparity,dsw]'   # the task-level baselines beside it
+    python -m experiments.real_scenes 'methods=[som,plane_components,uv_disparity,dsw]'   # task baselines beside it
 
-``methods``: ``som`` is the configured pipeline (any ``method=`` segmenter); ``uv_disparity`` and
-``dsw`` are the baselines of :mod:`somtorch.tasks.baselines` (deterministic: one run per scene;
-``dsw`` needs a metric camera and is skipped where the scene has none), scored the same way. Every
+``methods``: ``som`` is the configured pipeline (any ``method=`` segmenter); every other name is a
+task baseline of the registry :mod:`somtorch.tasks.baselines` (``uv_disparity``, ``dsw``,
+``plane_components``, …: one run per scene; one that needs a metric camera, such as ``dsw``, is
+skipped where the scene has none), scored the same way. Every
 scored row also carries the salient-object metrics (F-measure, MAE, S-measure of the kept mask
 against the union of the labelled objects, :mod:`somtorch.saliency_metrics`), means over the runs.
 """
@@ -129,31 +130,36 @@ class BaselineRun:
     no_object: bool = False
 
 
-def run_baseline(name: str, scene: Any, cfg: ScenesConfig) -> list[BaselineRun] | None:
-    """The baseline ``name`` on ``scene`` (None where it does not apply: ``dsw`` without a metric
-    camera). ``uv_disparity`` keeps the obstacle of most pixels × disparity (the largest near
-    one), ``dsw`` its nearest proposal; the reduction's tolerance is the pipeline's."""
-    from somtorch.tasks.baselines import dsw_boxes, uv_disparity_boxes
+def check_methods(methods: list[str], what: str = "methods") -> None:
+    """Raise a one-line error unless every name is ``som`` or a registered task baseline
+    (:data:`somtorch.tasks.baselines.TASK_BASELINES`; the message lists them)."""
+    from somtorch.tasks.baselines import task_baseline_names
+
+    known = ["som", *task_baseline_names()] if what == "methods" else task_baseline_names()
+    unknown = [m for m in methods if m not in known]
+    if unknown:
+        raise ValueError(f"{what}={list(methods)}: unknown {unknown}; choose from {', '.join(known)}")
+
+
+def run_baseline(name: str, scene: Any, reduction: Any) -> list[BaselineRun] | None:
+    """The task baseline ``name`` (:mod:`somtorch.tasks.baselines`) on ``scene``: its first box, reduced
+    with the pipeline's tolerance (``reduction``, a ReductionConfig), scored on the main object. None
+    where it does not apply (it needs a metric camera and the scene has none). Nothing found: the
+    whole map is kept and the run is flagged ``no_object``, as the pipeline's fail-safe does."""
+    from somtorch.tasks.baselines import get_task_baseline
     from somtorch.tasks.reduction import reduce_map
     from somtorch.tasks.scoring import score_reduction
 
-    if name == "uv_disparity":
-        found = uv_disparity_boxes(scene.disparity, scene.valid)
-        boxes = [max(found, key=lambda o: o.pixels * o.disparity).box] if found else []
-    elif name == "dsw":
-        cam = scene.camera
-        if cam is None or cam.baseline_unit not in ("m", "mm"):
-            return None
-        found = dsw_boxes(scene.disparity, scene.valid, cam.baseline / (1000.0 if cam.baseline_unit == "mm" else 1.0))
-        boxes = [found[0].box] if found else []
-    else:
-        raise ValueError(f"methods: unknown method {name!r}; known: som, uv_disparity, dsw")
-    r = cfg.reduction
+    baseline = get_task_baseline(name)
+    if not baseline.applies(scene.camera):
+        return None
+    found = baseline(scene.disparity, scene.valid, scene.camera)
+    boxes = [found[0].box] if found else []
     if not boxes:  # nothing detected: keep the whole map, as the pipeline's fail-safe does
         ys, xs = scene.valid.nonzero(as_tuple=True)
         boxes = [(int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max()))]
-    red = reduce_map(boxes, scene.valid, tolerance_px=r.tolerance_px, tolerance_frac=r.tolerance_frac,
-                     tolerance_image=r.tolerance_image)
+    red = reduce_map(boxes, scene.valid, tolerance_px=reduction.tolerance_px, tolerance_frac=reduction.tolerance_frac,
+                     tolerance_image=reduction.tolerance_image)
     score = score_reduction(red, scene.main_object_mask, scene.valid) if scene.main_object_mask is not None else None
     return [BaselineRun(red, score, no_object=not found)]
 
@@ -161,12 +167,13 @@ def run_baseline(name: str, scene: Any, cfg: ScenesConfig) -> list[BaselineRun] 
 def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
     """Run every scene (all files read first); returns the content of ``metrics.json``."""
     from somtorch.pipeline import run_pipeline
+    from somtorch.tasks.baselines import get_task_baseline
 
     specs = frames(cfg.datasets, cfg.frames, real=True if cfg.datasets is None and cfg.frames is None else None)
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
-    unknown = [m for m in cfg.methods if m not in ("som", "uv_disparity", "dsw")]
-    if unknown or not cfg.methods:
-        raise ValueError(f"methods={cfg.methods}: choose from som, uv_disparity, dsw")
+    if not cfg.methods:
+        raise ValueError("methods=[]: name at least one method (som or a task baseline)")
+    check_methods(cfg.methods)
     scenes = [load_frame(s, data_dir) for s in specs]  # every file checked before any training
     rows = []
     for spec, scene in zip(specs, scenes):
@@ -180,11 +187,12 @@ def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
                        "ground_found": res.ground is not None, **score_scene(scene, res.members, cfg),
                        "timings_ms": {k: 1e3 * v for k, v in res.timings.items()}}
             else:
-                runs = run_baseline(method, scene, cfg)
+                runs = run_baseline(method, scene, cfg.reduction)
                 if runs is None:
                     log.info("%s: %s skipped (no metric camera)", spec.name, method)
                     continue
-                row = {**head, "mode": "all pixels", **score_scene(scene, runs, cfg)}
+                row = {**head, "mode": "all pixels", "deterministic": get_task_baseline(method).deterministic,
+                       **score_scene(scene, runs, cfg)}
             row["wall_s"] = time.perf_counter() - t0
             rows.append(row)
             log.info("%s [%s]: %s", spec.name, method, ", ".join(

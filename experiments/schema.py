@@ -22,6 +22,7 @@ from somtorch.pipeline import PipelineConfig
 
 from .data_schema import DataSource, PathsConfig
 from .synth_config import SynthConfig
+from .tool_configs import GroundReportConfig, SynthGalleryConfig
 
 
 def _sgbm_schema() -> type:
@@ -91,6 +92,8 @@ def register() -> None:
     cs = ConfigStore.instance()
     cs.store(name="run_schema", node=RunConfig)
     cs.store(name="synth_schema", node=SynthConfig)
+    cs.store(name="ground_report_schema", node=GroundReportConfig)
+    cs.store(name="synth_gallery_schema", node=SynthGalleryConfig)
     # ${stem:${data.source}}: a file input's run folder and scene are named after the file
     OmegaConf.register_new_resolver("stem", lambda p: Path(str(p)).stem or "file", replace=True)
     # ${pair:${data.left}}: a stereo pair's run folder and scene are named after the left file, or

@@ -66,6 +66,8 @@ class StudyConfig(RunConfig):
             results come from the first.
         resize: ``[width, height]``: resample the scene first (nearest-neighbour disparity, scaled).
         skip_complete: skip the job if its folder holds a complete ``metrics.json`` of the same config.
+        task_baseline: run this task baseline (somtorch.tasks.baselines, e.g. ``plane_components``) once
+            instead of the pipeline; aggregate prints it beside the paper and the SOM (None = the pipeline).
     """
 
     study: str = "adhoc"
@@ -73,10 +75,16 @@ class StudyConfig(RunConfig):
     repeats: int = 1
     resize: Optional[list[int]] = None
     skip_complete: bool = True
+    task_baseline: Optional[str] = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
         from somtorch.validation import check_choice, check_positive_int
+
+        if self.task_baseline is not None:
+            from .real_scenes import check_methods
+
+            check_methods([self.task_baseline], "task_baseline")
 
         check_choice("execution", self.execution, EXECUTIONS)
         check_positive_int("repeats", self.repeats)
@@ -124,6 +132,16 @@ def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str
     obj_mask = None
     if scene.objects is not None:
         obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
+    if cfg.task_baseline is not None:  # one deterministic run, no training
+        from somtorch.atomic import write_staged
+
+        from .study_baseline import baseline_job
+
+        metrics = baseline_job(cfg, scene, obj_mask, config, chash, SCHEMA)
+        metrics["wall_s"] = time.perf_counter() - t_start
+        write_staged(out_dir, {"metrics.json": metrics})
+        (out_dir / "FAILED").unlink(missing_ok=True)
+        return metrics
     from .run import check_resources
 
     separate = cfg.execution == "separate" and cfg.runs > 1

@@ -4,18 +4,33 @@ Each row is one frame: left image, GT disparity, SGBM disparity, instance labels
 object starred). Writes ``docs/gallery/synth_<family>.png`` (at most 1600 px wide).
 
     python -m experiments.synth_gallery                       # every family, 4 frames, mixed cameras
-    python -m experiments.synth_gallery --families stairs --seeds 0 1 2 --out /tmp/g
+    python -m experiments.synth_gallery 'families=[stairs]' 'seeds=[0,1,2]' out=/tmp/g
 """
 
 from __future__ import annotations
 
-import argparse
+if __name__ == "__main__":  # --help before the heavy imports (torch, Hydra)
+    from .help import maybe_print_help
+
+    maybe_print_help("synth_gallery")
+
+import logging
 import math
 from pathlib import Path
 
+import hydra
 import numpy as np
+from hydra.utils import to_absolute_path
+from omegaconf import DictConfig, OmegaConf
+
+from . import CONF
+from .schema import register
+from .tool_configs import SynthGalleryConfig
 
 ROOT = Path(__file__).resolve().parents[1]
+CONF_DIR = str(CONF)
+log = logging.getLogger("somtorch.synth_gallery")
+register()
 
 
 def _disp_image(ax, d: np.ndarray, vmax: float, title: str) -> None:
@@ -77,22 +92,43 @@ def plot_frames(frames: list, path: Path) -> Path:
     return path
 
 
-def main(argv: list[str] | None = None) -> None:
-    from somtorch.synth import FAMILIES, generate_frame
+def gallery(cfg: SynthGalleryConfig) -> list[Path]:
+    """Write one picture per family of ``cfg``; returns their paths."""
+    from somtorch.synth import CAMERAS, FAMILIES, generate_frame
+    from somtorch.validation import check_choice
 
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--families", nargs="*", default=list(FAMILIES))
-    p.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2, 3])
-    p.add_argument("--cameras", nargs="*", default=["oakd", "kitti", "middlebury", "oakd"],
-                   help="camera of each seed, in turn")
-    p.add_argument("--scale", type=float, default=1.0)
-    p.add_argument("--out", default=str(ROOT / "docs" / "gallery"))
-    a = p.parse_args(argv)
-    for fam in a.families:
-        cams = [a.cameras[i % len(a.cameras)] for i in range(len(a.seeds))]
-        frames = [generate_frame(fam, s, cam, scale=a.scale) for s, cam in zip(a.seeds, cams)]
-        print(plot_frames(frames, Path(a.out) / f"synth_{fam}.png"))
+    for f in cfg.families:  # every name checked before the first frame is drawn
+        check_choice("families", f, FAMILIES)
+    for c in cfg.cameras:
+        check_choice("cameras", c, CAMERAS)
+    if not cfg.seeds or not cfg.cameras or not 0 < cfg.scale <= 1:
+        raise ValueError(f"need seeds and cameras and 0 < scale <= 1; got seeds={cfg.seeds}, cameras={cfg.cameras}, "
+                         f"scale={cfg.scale}")
+    out = Path(to_absolute_path(cfg.out)) if cfg.out else ROOT / "docs" / "gallery"
+    written = []
+    for fam in cfg.families:
+        cams = [cfg.cameras[i % len(cfg.cameras)] for i in range(len(cfg.seeds))]
+        frames = [generate_frame(fam, s, cam, scale=cfg.scale) for s, cam in zip(cfg.seeds, cams)]
+        written.append(plot_frames(frames, out / f"synth_{fam}.png"))
+        log.info("%s", written[-1])
+    return written
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="synth_gallery")
+def main(dcfg: DictConfig) -> list[Path]:
+    from .schema import one_line_errors
+
+    with one_line_errors(log):
+        cfg: SynthGalleryConfig = OmegaConf.to_object(dcfg)
+        return gallery(cfg)
+
+
+def cli() -> None:
+    """Console entry: the overrides are checked against the schema first ("did you mean")."""
+    from .cli import run_checked
+
+    run_checked(main, SynthGalleryConfig)
 
 
 if __name__ == "__main__":
-    main()
+    cli()

@@ -70,6 +70,7 @@ class ValidateConfig(RunConfig):
         loss_margin: the largest drop of one dataset's hit rate a change may cost.
         ni_margin: non-inferiority margin of a removal (and of the all-objects reading).
         transforms: robustness checks: every frame transformed (``flip``, ``resample:F``, ``pole``, ``border``, ``specks``; experiments.scenes.add_junk) and scored with the defaults.
+        baselines: task baselines (somtorch.tasks.baselines) scored beside the defaults, one run per frame.
     """
 
     datasets: Optional[list[str]] = None
@@ -86,6 +87,8 @@ class ValidateConfig(RunConfig):
     # robustness: every frame transformed (experiments.scenes.add_junk: "flip", "resample:F",
     # "pole", "border", "specks") and scored with the defaults, beside the frames as they are
     transforms: list[str] = field(default_factory=list)
+    # task baselines scored beside the defaults (one run per frame; those that need no checkpoint)
+    baselines: list[str] = field(default_factory=lambda: ["plane_components", "uv_disparity"])
 
 
 def _key(overrides: dict[str, Any]) -> str:
@@ -261,8 +264,11 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     from .datasets import frames, load_frame
     from .scenes import check_junk_kind
 
+    from .real_scenes import check_methods
+
     for kind in cfg.transforms:  # before any work: a typo must not cost the whole protocol
         check_junk_kind(kind)
+    check_methods(cfg.baselines, "baselines")
     specs = frames(cfg.datasets, cfg.frames)
     if not specs:
         raise ValueError(f"no frame selected (datasets={cfg.datasets}, frames={cfg.frames})")
@@ -348,6 +354,10 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
         knobs[k] = {"default": defaults[k], "values": entries,
                     "verdict": verdict(k, entries, in_sample, cfg.neutral)}
     summary = summarize(proto.table, rows)
+    from .validate_baselines import score_baselines, summarize_baselines
+
+    for row, got in zip(rows, score_baselines(caches, cfg.baselines, cfg.reduction).values()):
+        row["baselines"] = got
     if cfg.gallery is not None:
         for c in caches:
             gallery(c, Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
@@ -358,7 +368,8 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
                      "ensemble": cfg.ensemble, "seed": cfg.seed},
             "candidates": {c.spec.name: {k: {m: v[m] for m in ("runs", "useful_hits", "all_objects_hits")}
                                          for k, v in c.scores.items()} for c in caches},
-            "robustness": robustness, "wall_s": time.perf_counter() - t0}
+            "robustness": robustness, "baselines_summary": summarize_baselines(proto.table, rows, cfg.baselines),
+            "wall_s": time.perf_counter() - t0}
 
 
 def _scorable(specs: list[Any], data_dir: Path) -> list[Any]:

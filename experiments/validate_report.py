@@ -105,7 +105,9 @@ def to_markdown(report: dict[str, Any]) -> str:
             v = list(robust[k].values())
             out.append(f"| {k} | {sum(x['useful_hits'] for x in v)} | {sum(x['all_objects_hits'] for x in v)} | "
                        f"{sum(x['runs'] for x in v)} |")
-    return "\n".join(out) + "\n"
+    from .validate_baselines import baselines_markdown
+
+    return "\n".join(out) + "\n" + baselines_markdown(report)
 
 
 def gallery(cache: Any, path: Path, overrides: dict[str, Any] | None = None, member: int = 0) -> Path:

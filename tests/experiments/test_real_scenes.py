@@ -74,13 +74,14 @@ def test_unknown_frame_or_dataset_fails_before_work(tmp_path):
 
 def test_baselines_run_through_the_same_scoring(shared_data, tmp_path):
     proc = _run(tmp_path, "ensemble=2", "train.epochs=3", "frames=[oakd_toy,flyingthings3d]",
-                "methods=[som,uv_disparity,dsw]", f"paths.data_dir={shared_data}")
+                "methods=[som,plane_components,uv_disparity,dsw]", f"paths.data_dir={shared_data}")
     assert proc.returncode == 0, proc.stderr[-2000:]
     rows = json.loads((tmp_path / "metrics.json").read_text())["rows"]
     # FlyingThings3D has no metric camera: DSW is skipped there, not scored as a miss
     assert [(r["scene"], r["method"]) for r in rows] == [
-        ("oakd_toy", "som"), ("oakd_toy", "uv_disparity"), ("oakd_toy", "dsw"),
-        ("flyingthings3d", "som"), ("flyingthings3d", "uv_disparity")]
+        ("oakd_toy", "som"), ("oakd_toy", "plane_components"), ("oakd_toy", "uv_disparity"), ("oakd_toy", "dsw"),
+        ("flyingthings3d", "som"), ("flyingthings3d", "plane_components"), ("flyingthings3d", "uv_disparity")]
+    assert all(r["deterministic"] for r in rows if r["method"] != "som")
     for r in rows:
         assert r["runs"] == (2 if r["method"] == "som" else 1)
         assert 0 <= r["useful_hits"] <= r["identified_95"] <= r["runs"]
@@ -89,4 +90,5 @@ def test_baselines_run_through_the_same_scoring(shared_data, tmp_path):
     md = (tmp_path / "results.md").read_text()
     assert "| oakd_toy | uv_disparity |" in md and "S-measure" in md
     bad = _run(tmp_path / "bad", "methods=[som,hough]", "frames=[oakd_toy]", f"paths.data_dir={shared_data}")
-    assert bad.returncode != 0 and "hough" in (bad.stderr + bad.stdout)
+    said = bad.stderr + bad.stdout
+    assert bad.returncode != 0 and "hough" in said and "plane_components" in said and "Traceback" not in said

@@ -120,6 +120,7 @@ def test_config_hash_ignores_where_files_go():
 @pytest.mark.parametrize("override, message", [
     ("execution=bogus", "execution"), ("repeats=0", "repeats"), ("resize=[10]", "resize"),
     ("method=bogus", "method"), ("baseline.kmeans_init=bogus", "kmeans_init"),
+    ("task_baseline=bogus", "task_baseline.*plane_components"),
 ])
 def test_bad_study_configs_fail_before_any_work(override, message):
     with pytest.raises(Exception, match=message):
@@ -239,6 +240,27 @@ def test_table1_sweep_aggregates_into_the_paper_s_tables(tmp_path, shared_data):
     for name in ("table1.png", "table2.png"):  # the plots the README promises
         img = mpimg.imread(tmp_path / "agg" / name)
         assert img.shape[0] > 200 and img.shape[1] > 400 and img[..., :3].std() > 0.05  # not blank
+
+
+def test_task_baselines_get_their_rows_in_tables_1_and_2(tmp_path, shared_data):
+    from experiments.real_scenes import run_baseline
+    from somtorch.config import ReductionConfig
+    from somtorch.disparity import load_scene
+
+    _study(tmp_path, "+experiment=table1_baselines", "data=kitti2015", f"paths.data_dir={shared_data}")
+    sweep = tmp_path / "studies" / "table1"
+    jobs = find_metrics([sweep])
+    assert sorted(m["method"] for _, m in jobs) == ["plane_components", "uv_disparity"]
+    scene = load_scene(shared_data / "kitti2015" / "devkit_demo")
+    for _, m in jobs:  # one run, scored exactly as real_scenes scores the baseline
+        assert m["summary"]["runs"] == 1 and m["mode"] == "all px"
+        (direct,) = run_baseline(m["method"], scene, ReductionConfig())
+        assert m["summary"]["useful_hits"] == int(direct.score.useful_hit)
+        assert m["runs"]["reduction_union"] == [pytest.approx(direct.reduction.reduction_union)]
+    aggregate([sweep], tmp_path / "agg")
+    t1 = (tmp_path / "agg" / "table1.md").read_text()
+    assert "| all px | kitti2015 | plane_components | – | 1 |" in t1 and "NOR stair | 91 | 91" in t1
+    assert "| all px | kitti2015 | uv_disparity |" in (tmp_path / "agg" / "table2.md").read_text()
 
 
 def test_optuna_sweeper_searches_and_reports_the_best_trade_off(tmp_path, shared_data):

@@ -170,6 +170,15 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     assert "| **macro, real** |" in md and "| objects.merge | 0.75 | 0.0 (neutral) |" in md
     assert list(rep["robustness"]) == ["flip"] and "| flip |" in md
     assert sorted(p.name for p in (tmp_path / "gallery").glob("*.png")) == sorted(f"{r['frame']}.png" for r in rep["rows"])
+    # the task baselines (default: plane_components, uv_disparity), one run per frame, beside the defaults
+    for r in rep["rows"]:
+        assert list(r["baselines"]) == ["plane_components", "uv_disparity"]
+        for b in r["baselines"].values():
+            assert b["runs"] == 1 and 0 <= b["useful_hits"] <= b["identified_95"] <= 1 and 0 <= b["saliency"]["mae"] <= 1
+    pc = rep["baselines_summary"]["plane_components"]
+    per = [pc["datasets"][d]["useful_hits"] for d in ("kitti2015", "oakd", "eth3d")]
+    assert pc["macro_real"]["useful_hits"] == pytest.approx(sum(per) / 3)
+    assert "| | plane_components |" in md and "| kitti2015 | SOM defaults |" in md
 
 
 def _toy_scene():
@@ -216,6 +225,16 @@ def test_flip_junk_mirrors_every_layer():
     assert out.camera is None and out.name == "toy+flip"
     with pytest.raises(ValueError, match="unknown junk kind"):
         add_junk(scene, "rotate")
+
+
+def test_an_unknown_baseline_fails_before_any_work(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, "-m", "experiments.validate", f"hydra.run.dir={tmp_path}", "ensemble=2",
+         "baselines=[plane_components,hough]"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0
+    out = proc.stderr + proc.stdout
+    assert "hough" in out and "plane_components" in out and "uv_disparity" in out and "Traceback" not in out
+    assert not (tmp_path / "validate.json").exists()
 
 
 def test_an_unknown_transform_fails_before_any_work(tmp_path):

@@ -57,3 +57,44 @@ def test_baselines_are_deterministic_and_check_inputs():
         dsw_boxes(d, valid[:10], baseline=0.1)
     with pytest.raises(ValueError, match="baseline"):
         dsw_boxes(d, valid, baseline=0.0)
+
+
+def test_registry_serves_the_builtins_best_first():
+    from somtorch.disparity.camera import Camera
+    from somtorch.tasks.baselines import get_task_baseline, task_baseline_names
+
+    assert {"uv_disparity", "dsw"} <= set(task_baseline_names())
+    d, valid, truth = _street()
+    uv = get_task_baseline("uv_disparity")
+    assert uv.deterministic and not uv.needs_camera and uv.applies(None)
+    first = uv(d, valid)[0]  # the registry's order: most pixels x disparity first
+    assert _iou(first.box, truth) > 0.8
+    dsw = get_task_baseline("dsw")
+    assert dsw.needs_camera and not dsw.applies(None)
+    assert not dsw.applies(Camera(focal_px=100.0, cx=80.0, cy=60.0, baseline=1.0, baseline_unit="unit"))
+    metric = Camera(focal_px=100.0, cx=80.0, cy=60.0, baseline=250.0, baseline_unit="mm")
+    assert dsw(d, valid, metric)[0].disparity == pytest.approx(40.0, abs=2.0)
+    with pytest.raises(ValueError, match="metric camera"):
+        dsw(d, valid)
+
+
+def test_registry_errors_name_the_valid_choices():
+    from somtorch.tasks.baselines import (TASK_BASELINES, TaskBaselineError, get_task_baseline,
+                                          register_task_baseline)
+
+    with pytest.raises(TaskBaselineError, match="hough.*uv_disparity.*dsw"):
+        get_task_baseline("hough")
+    with pytest.raises(ValueError, match="already registered"):
+        register_task_baseline("uv_disparity", lambda d, v, camera=None: [])
+    with pytest.raises(ValueError, match="identifier"):
+        register_task_baseline("som", lambda d, v, camera=None: [])
+
+    def whole(d, v, camera=None):
+        return []
+
+    try:
+        entry = register_task_baseline("test_whole_map", whole, deterministic=False)
+        assert get_task_baseline("test_whole_map") is entry and not entry.deterministic
+        assert entry(*_street()[:2]) == []
+    finally:
+        TASK_BASELINES.pop("test_whole_map", None)

@@ -1,4 +1,4 @@
-"""Task-level baselines for step 1c: obstacle boxes without a SOM, scored like the SOM's kept areas.
+"""Classical task-level baselines for step 1c: obstacle boxes without a SOM, scored like the SOM's kept areas.
 
 * :func:`uv_disparity_boxes` — the u-v-disparity obstacle detector of Labayrade, Aubert & Tarel
   (IV 2002): the ground is the dominant oblique line of the *v-disparity* image (one disparity
@@ -13,43 +13,21 @@
 
 Both are deterministic (no seed), numpy + OpenCV, and return boxes ``(x0, y0, x1, y1)``
 inclusive, best first, so that :func:`~somtorch.tasks.reduction.reduce_map` and the scorers of
-:mod:`somtorch.evaluation` treat them exactly like the SOM's kept areas.
+:mod:`somtorch.evaluation` treat them exactly like the SOM's kept areas. Registered (see
+:mod:`~somtorch.tasks.baselines.registry`) as ``uv_disparity`` (ranked by pixels × disparity: the
+largest near obstacle first) and ``dsw`` (nearest proposal first; needs a metric camera).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import torch
 
-from somtorch.validation import check_tensor
+from .registry import Obstacle, map_arrays, register_task_baseline
 
-__all__ = ["Obstacle", "dsw_boxes", "uv_disparity_boxes"]
-
-Box = tuple[int, int, int, int]
-
-
-@dataclass(frozen=True)
-class Obstacle:
-    """One baseline detection: its box, median disparity (px) and pixel count."""
-
-    box: Box
-    disparity: float
-    pixels: int
-
-
-def _arrays(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
-    check_tensor("disparity", disparity, ndim=2)
-    check_tensor("valid", valid, ndim=2, dtype=torch.bool)
-    if disparity.shape != valid.shape:
-        raise ValueError(f"disparity {tuple(disparity.shape)} and valid {tuple(valid.shape)} differ in shape")
-    d = disparity.detach().cpu().numpy().astype(np.float64)
-    v = valid.detach().cpu().numpy() & np.isfinite(d)
-    if v.sum() < 16:
-        raise ValueError(f"the map has {int(v.sum())} valid pixels; a baseline needs at least 16")
-    return d, v
+__all__ = ["dsw_boxes", "uv_disparity_boxes"]
 
 
 def _bins(d: np.ndarray, v: np.ndarray, n_bins: int) -> tuple[np.ndarray, float, float]:
@@ -110,7 +88,7 @@ def uv_disparity_boxes(disparity: torch.Tensor, valid: torch.Tensor, *, n_bins: 
     Shape:
         ``disparity``, ``valid`` ``(H, W)``.
     """
-    d, v = _arrays(disparity, valid)
+    d, v = map_arrays(disparity, valid)
     h, w = d.shape
     b, _, _ = _bins(d, v, n_bins)
     line = _ground_line(b, v, n_bins)
@@ -160,7 +138,7 @@ def dsw_boxes(disparity: torch.Tensor, valid: torch.Tensor, baseline: float, *,
     """
     if not baseline > 0:
         raise ValueError(f"baseline must be > 0 metres; got {baseline!r}")
-    d, v = _arrays(disparity, valid)
+    d, v = map_arrays(disparity, valid)
     h, w = d.shape
     lo, hi = np.percentile(d[v], [5, 99.5])
     lo = max(lo, 1e-3)
@@ -203,3 +181,15 @@ def dsw_boxes(disparity: torch.Tensor, valid: torch.Tensor, baseline: float, *,
         if len(out) == top:
             break
     return out
+
+
+def _uv_disparity(disparity: torch.Tensor, valid: torch.Tensor, camera: object = None) -> list[Obstacle]:
+    return sorted(uv_disparity_boxes(disparity, valid), key=lambda o: -o.pixels * o.disparity)
+
+
+def _dsw(disparity: torch.Tensor, valid: torch.Tensor, camera: object = None) -> list[Obstacle]:
+    return dsw_boxes(disparity, valid, camera.baseline_m)  # type: ignore[union-attr]
+
+
+register_task_baseline("uv_disparity", _uv_disparity)
+register_task_baseline("dsw", _dsw, needs_camera=True)

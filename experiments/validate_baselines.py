@@ -1,0 +1,101 @@
+"""The task baselines in ``python -m experiments.validate`` (``baselines=``): one run per frame
+(they are deterministic), scored like the SOM's defaults and reported beside them, per dataset and
+as the real / all macro averages (split from :mod:`experiments.validate`)."""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+__all__ = ["baselines_markdown", "score_baselines", "summarize_baselines"]
+
+log = logging.getLogger("somtorch.validate")
+
+
+def score_baselines(caches: list[Any], names: list[str], reduction: Any) -> dict[str, dict[str, Any]]:
+    """``{frame: {baseline: counts}}`` for every frame cache (``experiments.validate.SceneCache``);
+    a baseline that does not apply to a frame (no metric camera) gets None."""
+    from somtorch.evaluation import all_objects
+    from somtorch.saliency_metrics import saliency_scores
+
+    from .real_scenes import run_baseline
+
+    out: dict[str, dict[str, Any]] = {}
+    for c in caches:
+        scene, per = c.scene, {}
+        for name in names:
+            t0 = time.perf_counter()
+            runs = run_baseline(name, scene, reduction)
+            if runs is None:
+                per[name] = None
+                continue
+            (r,) = runs
+            target = all_objects(scene)
+            per[name] = {"runs": 1, "useful_hits": int(r.score.useful_hit), "identified_95": int(r.score.identified_95),
+                         "all_objects_hits": int(target.hit(r.reduction)) if target is not None else 0,
+                         "no_object": int(r.no_object), "reduction": r.score.reduction_union,
+                         "saliency": saliency_scores(r.reduction.mask, scene.objects > 0),
+                         "wall_s": time.perf_counter() - t0}
+        out[c.spec.name] = per
+        log.info("%s: baselines %s", c.spec.name, ", ".join(
+            f"{n} {'–' if p is None else 'useful' if p['useful_hits'] else 'miss'}" for n, p in per.items()))
+    return out
+
+
+def summarize_baselines(table: Any, rows: list[dict[str, Any]], names: list[str]) -> dict[str, Any]:
+    """Per baseline: per dataset the useful / all-objects rates and mean F / MAE / S, and the macro
+    averages (real, all) with the protocol's frame weighting (:class:`experiments.protocol.FrameTable`).
+    A dataset whose frames a baseline skipped (no metric camera) reads NaN."""
+    out: dict[str, Any] = {}
+    nan = float("nan")
+    for name in names:
+        got = [r["baselines"][name] for r in rows]
+        arr = {m: np.array([nan if g is None else g[m] / g["runs"] for g in got])
+               for m in ("useful_hits", "all_objects_hits", "no_object")}
+        sal = {k: np.array([nan if g is None else g["saliency"][k] for g in got])
+               for k in ("f_measure", "mae", "s_measure")}
+        per = {m: table.per_dataset(v) for m, v in {**arr, **sal}.items()}
+        out[name] = {"datasets": {d: {m: per[m][d] for m in per} for d in table.names},
+                     **{f"macro_{label}": {m: table.macro(v, real_only)[0] for m, v in arr.items()}
+                        for label, real_only in (("real", True), ("all", False))}}
+    return out
+
+
+def _pct(x: float) -> str:
+    return "–" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.1f}"
+
+
+def _num(x: float, digits: int) -> str:
+    return "–" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
+
+
+def baselines_markdown(report: dict[str, Any]) -> str:
+    """The table of the task baselines beside the SOM's defaults (empty without baselines)."""
+    base = report.get("baselines_summary") or {}
+    if not base:
+        return ""
+    sm = report["summary"]
+    out = ["", "Task baselines beside the SOM's defaults (one run per frame; % of frames, frames weighted as "
+           "in the protocol; – = not applicable, e.g. no metric camera):", "",
+           "| dataset | method | useful | all-obj | no object | F | MAE | S |", "|---|---|---|---|---|---|---|---|"]
+    for d, r in sm["datasets"].items():
+        out.append(f"| {d} | SOM defaults | {_pct(r['default_useful_hits'])} | {_pct(r['default_all_objects_hits'])} | "
+                   f"| {_num(r.get('f_measure', float('nan')), 2)} | {_num(r.get('mae', float('nan')), 3)} | "
+                   f"{_num(r.get('s_measure', float('nan')), 2)} |")
+        for name, b in base.items():
+            x = b["datasets"][d]
+            out.append(f"| | {name} | {_pct(x['useful_hits'])} | {_pct(x['all_objects_hits'])} | {_pct(x['no_object'])} | "
+                       f"{_num(x['f_measure'], 2)} | {_num(x['mae'], 3)} | {_num(x['s_measure'], 2)} |")
+    for label in ("real", "all"):
+        m = sm[f"macro_{label}"]
+        out.append(f"| **macro, {label}** | SOM defaults | {_pct(m['default_useful_hits'])} | "
+                   f"{_pct(m['default_all_objects_hits'])} | | | | |")
+        for name, b in base.items():
+            x = b[f"macro_{label}"]
+            out.append(f"| | {name} | {_pct(x['useful_hits'])} | {_pct(x['all_objects_hits'])} | "
+                       f"{_pct(x['no_object'])} | | | |")
+    return "\n".join(out) + "\n"
