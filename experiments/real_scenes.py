@@ -141,16 +141,18 @@ def check_methods(methods: list[str], what: str = "methods") -> None:
         raise ValueError(f"{what}={list(methods)}: unknown {unknown}; choose from {', '.join(known)}")
 
 
-def run_baseline(name: str, scene: Any, reduction: Any) -> list[BaselineRun] | None:
+def run_baseline(name: str, scene: Any, reduction: Any, left_out: str | None = None) -> list[BaselineRun] | None:
     """The task baseline ``name`` (:mod:`somtorch.tasks.baselines`) on ``scene``: its first box, reduced
     with the pipeline's tolerance (``reduction``, a ReductionConfig), scored on the main object. None
     where it does not apply (it needs a metric camera and the scene has none). Nothing found: the
-    whole map is kept and the run is flagged ``no_object``, as the pipeline's fail-safe does."""
+    whole map is kept and the run is flagged ``no_object``, as the pipeline's fail-safe does.
+    ``left_out``: a generator camera whose frames a trained baseline must not have seen (its
+    leave-one-dataset-out fold, :meth:`~somtorch.tasks.baselines.TaskBaseline.without`)."""
     from somtorch.tasks.baselines import get_task_baseline
     from somtorch.tasks.reduction import reduce_map
     from somtorch.tasks.scoring import score_reduction
 
-    baseline = get_task_baseline(name)
+    baseline = get_task_baseline(name).without(left_out)
     if not baseline.applies(scene.camera):
         return None
     found = baseline(scene.disparity, scene.valid, scene.camera)

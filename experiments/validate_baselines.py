@@ -1,6 +1,8 @@
 """The task baselines in ``python -m experiments.validate`` (``baselines=``): one run per frame
 (they are deterministic), scored like the SOM's defaults and reported beside them, per dataset and
-as the real / all macro averages (split from :mod:`experiments.validate`)."""
+as the real / all macro averages (split from :mod:`experiments.validate`). A trained baseline
+(``learned``) runs, on each frame, the model of the frame's fold: trained without the generated
+frames of the frame's camera (``FrameSpec.camera``), so a left-out dataset's rig is never trained on."""
 
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ def score_baselines(caches: list[Any], names: list[str], reduction: Any) -> dict
         scene, per = c.scene, {}
         for name in names:
             t0 = time.perf_counter()
-            runs = run_baseline(name, scene, reduction)
+            runs = run_baseline(name, scene, reduction, left_out=c.spec.camera)  # a trained one: its fold
             if runs is None:
                 per[name] = None
                 continue

@@ -8,10 +8,11 @@ import json
 import pytest
 import torch
 
-from somtorch.baselines.learned import (CheckpointMismatchError, RealDataError, check_synthetic, evaluate, fit,
-                                        learned_boxes, load, prepare_input, save)
+from somtorch.baselines.learned import (CheckpointMismatchError, RealDataError, check_synthetic, evaluate, fit, load,
+                                        prepare_input, save)
 from somtorch.baselines.learned.data import prepare_target, tensor_hash
 from somtorch.config.learned import LearnedFitConfig, LearnedModelConfig
+from somtorch.tasks.baselines import get_task_baseline, learned_boxes
 
 TINY = LearnedModelConfig(widths=[8, 16, 32], groups=4, height=32, width=48)
 
@@ -145,9 +146,22 @@ def test_config_rules_name_the_field():
         LearnedModelConfig(height=30)
     with pytest.raises(ValueError, match="groups=3 must divide every width"):
         LearnedModelConfig(groups=3)
+    from somtorch.baselines.learned.data import synthetic_frames
     from somtorch.config.learned import LearnedDataConfig
 
-    with pytest.raises(ValueError, match=r"data.cameras: unknown \['zed'\]"):
-        LearnedDataConfig(cameras=["zed"])
+    with pytest.raises(ValueError, match=r"data.cameras='zed' is not known; valid names: kitti, middlebury, oakd"):
+        synthetic_frames(LearnedDataConfig(cameras=["zed"]))
+    with pytest.raises(ValueError, match="data.cameras must be a non-empty list of distinct names"):
+        LearnedDataConfig(cameras=["oakd", "oakd"])
     with pytest.raises(ValueError, match="data.first_seed"):
         LearnedDataConfig(first_seed=3)  # the corpus seeds (scored) are never trained on
+
+
+def test_registered_with_a_fold_per_camera_and_a_clear_error_without_a_model(tmp_path, monkeypatch):
+    monkeypatch.setenv("SOMTORCH_CACHE", str(tmp_path))
+    entry = get_task_baseline("learned")
+    fold = entry.without("kitti")
+    assert fold.fn.without_camera == "kitti" and entry.without(None) is entry
+    d, v, _, _ = box_on_plane(torch.Generator().manual_seed(0))
+    with pytest.raises(FileNotFoundError, match=r"somtorch-train-baseline 'data.cameras=\[oakd,middlebury\]'"):
+        fold(d, v)

@@ -101,6 +101,13 @@ class FrameRef:
 
 def synthetic_frames(cfg: LearnedDataConfig) -> list[FrameRef]:
     """Every frame of ``cfg``: per family x camera, ``frames`` training seeds then ``held_out`` seeds."""
+    from somtorch.synth import CAMERAS, FAMILIES
+    from somtorch.validation import check_choice
+
+    for f in cfg.families:
+        check_choice("data.families", f, FAMILIES)
+    for c in cfg.cameras:
+        check_choice("data.cameras", c, CAMERAS)
     versions = ("gt", "sgbm") if cfg.sgbm else ("gt",)
     out = []
     for fam in cfg.families:

@@ -1,6 +1,6 @@
-"""From the network's mask to obstacle boxes, the same :class:`~somtorch.tasks.baselines.Obstacle`
-list the task-level baselines return (best first), so that :func:`~somtorch.tasks.reduction.reduce_map`
-and the scorers treat the learned baseline exactly like the SOM's kept areas.
+"""From the network's mask to boxes: its connected parts, best first (the task-level adapter,
+:mod:`somtorch.tasks.baselines.learned`, turns them into the :class:`~somtorch.tasks.baselines.Obstacle`
+list every task baseline returns).
 
 The probabilities are resized back to the map's size (bilinear); the pixels above
 ``cfg.threshold`` form 8-connected parts; a part smaller than ``cfg.min_area`` of the image, or
@@ -10,6 +10,8 @@ their summed probability (the network's confidence times the area).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 import torch
@@ -17,9 +19,19 @@ import torch.nn.functional as F
 
 from somtorch.baselines.learned.data import prepare_input
 from somtorch.baselines.learned.model import UNet
-from somtorch.tasks.baselines import Obstacle
 
-__all__ = ["learned_boxes", "mask_obstacles", "predict_proba"]
+__all__ = ["Part", "mask_parts", "predict_parts", "predict_proba"]
+
+
+@dataclass(frozen=True)
+class Part:
+    """One connected part of the predicted mask: its box ``(x0, y0, x1, y1)`` inclusive over its
+    valid pixels, their median disparity (px) and count, and its summed probability (the rank)."""
+
+    box: tuple[int, int, int, int]
+    disparity: float
+    pixels: int
+    score: float
 
 
 @torch.no_grad()
@@ -40,9 +52,9 @@ def predict_proba(model: UNet, disparity: torch.Tensor, valid: torch.Tensor,
     return torch.sigmoid(up)[0, 0]
 
 
-def mask_obstacles(prob: torch.Tensor, disparity: torch.Tensor, valid: torch.Tensor, *, threshold: float,
-                   min_area: float) -> list[Obstacle]:
-    """The parts of ``prob > threshold`` as obstacles, best (largest summed probability) first.
+def mask_parts(prob: torch.Tensor, disparity: torch.Tensor, valid: torch.Tensor, *, threshold: float,
+               min_area: float) -> list[Part]:
+    """The parts of ``prob > threshold``, best (largest summed probability) first.
 
     Shape:
         ``prob``, ``disparity``, ``valid``: :math:`(H, W)`.
@@ -62,16 +74,16 @@ def mask_obstacles(prob: torch.Tensor, disparity: torch.Tensor, valid: torch.Ten
             continue
         ys, xs = np.nonzero(pv)
         box = (int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max()))
-        scored.append((float(p[part].sum()), Obstacle(box, float(np.median(d[pv])), int(pv.sum()))))
-    return [o for _, o in sorted(scored, key=lambda t: -t[0])]
+        scored.append(Part(box, float(np.median(d[pv])), int(pv.sum()), float(p[part].sum())))
+    return sorted(scored, key=lambda t: -t.score)
 
 
-def learned_boxes(disparity: torch.Tensor, valid: torch.Tensor, camera=None, *, model: UNet,
-                  image: torch.Tensor | None = None) -> list[Obstacle]:
-    """The learned baseline's obstacles on one map, best first (``camera`` is not used).
+def predict_parts(model: UNet, disparity: torch.Tensor, valid: torch.Tensor,
+                  image: torch.Tensor | None = None) -> list[Part]:
+    """The parts of the network's mask on one map, at the map's size, best first.
 
     Shape:
         ``disparity``, ``valid``: :math:`(H, W)`.
     """
     prob = predict_proba(model, disparity, valid, image)
-    return mask_obstacles(prob, disparity, valid, threshold=model.cfg.threshold, min_area=model.cfg.min_area)
+    return mask_parts(prob, disparity, valid, threshold=model.cfg.threshold, min_area=model.cfg.min_area)

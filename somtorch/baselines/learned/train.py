@@ -24,7 +24,7 @@ import torch
 import torch.nn.functional as F
 
 from somtorch.baselines.learned.model import UNet
-from somtorch.baselines.learned.predict import mask_obstacles
+from somtorch.baselines.learned.predict import mask_parts
 from somtorch.config.learned import LearnedFitConfig, LearnedModelConfig
 from somtorch.validation import check_tensor
 
@@ -157,7 +157,7 @@ def evaluate(model: UNet, inputs: torch.Tensor, targets: torch.Tensor, *, batch_
         union = int((truth | pred).sum())
         mask_iou.append(int((truth & pred).sum()) / union if union else 1.0)
         valid = x[1] > 0.5
-        found = mask_obstacles(p, x[0], valid, threshold=cfg.threshold, min_area=cfg.min_area)
+        found = mask_parts(p, x[0], valid, threshold=cfg.threshold, min_area=cfg.min_area)
         ys, xs = truth.nonzero(as_tuple=True)
         if not found or len(ys) == 0:
             box_iou.append(0.0)

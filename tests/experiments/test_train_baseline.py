@@ -1,0 +1,58 @@
+"""``somtorch-train-baseline`` as the user runs it (real processes, generated frames, a temporary cache)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = ["model.widths=[8,16]", "model.height=32", "model.width=48", "data.families=[garden]", "data.cameras=[oakd]",
+        "data.frames=2", "data.held_out=1", "data.scale=0.1", "fit.epochs=1", "workers=1"]
+
+
+def _run(tmp_path: Path, *overrides: str, timeout: int = 300) -> subprocess.CompletedProcess:
+    env = {**os.environ, "SOMTORCH_CACHE": str(tmp_path / "cache")}
+    env.pop("HYDRA_FULL_ERROR", None)
+    env.pop("SOMTORCH_CORPUS", None)
+    return subprocess.run([sys.executable, "-m", "experiments.train_baseline", *overrides], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("overrides, said", [
+    (["fit.epochs=100000"], "over budget_minutes=15"),
+    (["budget_minutes=1000000.0", "max_memory_frac=0.000000001"], "over max_memory_frac=1e-09"),
+    (["model.height=30"], "height=30 and width=96 must divide by 2"),
+    (["fit.epochs=0"], "fit.epochs must be an integer in [1, inf)"),
+])
+def test_refuses_in_one_line_before_any_work(tmp_path, overrides, said):
+    proc = _run(tmp_path, *overrides, timeout=120)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and said in lines[0] and "Traceback" not in proc.stderr, proc.stderr
+    assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").rglob("*.safetensors"))
+
+
+def test_refuses_a_corpus_under_the_real_data(tmp_path, shared_data):
+    proc = _run(tmp_path, f"paths.data_dir={shared_data}", f"corpus={shared_data}/synth", *TINY, timeout=120)
+    assert proc.returncode == 2 and "lies under the real data" in proc.stderr, proc.stderr[-2000:]
+    assert not (shared_data / "synth").exists()
+
+
+def test_trains_saves_and_then_reuses_the_model(tmp_path):
+    first = _run(tmp_path, *TINY)
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert "estimated: 1 model(s), 3 frame(s) to render" in first.stdout
+    (sidecar,) = (tmp_path / "cache" / "learned").glob("*/model.json")
+    doc = json.loads(sidecar.read_text())
+    assert doc["format"] == "somtorch.learned/1" and len(doc["data_hash"]) == 16
+    assert doc["data"]["cameras"] == ["oakd"] and doc["train_frames"] == 4 and doc["held_out_metrics"]["frames"] == 2
+    assert any((sidecar.parent / "tb").iterdir())
+    weights = sidecar.with_suffix(".safetensors").read_bytes()
+    again = _run(tmp_path, *TINY)
+    assert again.returncode == 0 and "0 frame(s) to render" in again.stdout, again.stderr[-3000:]
+    assert sidecar.with_suffix(".safetensors").read_bytes() == weights  # reused, not retrained
