@@ -56,3 +56,53 @@ def test_trains_saves_and_then_reuses_the_model(tmp_path):
     again = _run(tmp_path, *TINY)
     assert again.returncode == 0 and "0 frame(s) to render" in again.stdout, again.stderr[-3000:]
     assert sidecar.with_suffix(".safetensors").read_bytes() == weights  # reused, not retrained
+
+
+def test_frames_carry_the_camera_of_their_fold():
+    from experiments.datasets import datasets
+
+    cams = {d.name: {f.camera for f in d.frames} for d in datasets()}
+    assert cams["kitti2015"] == {"kitti"} and cams["oakd"] == {"oakd"}
+    assert cams["middlebury2014"] == cams["middlebury_2005_2006"] == {"middlebury"}
+    assert cams["eth3d"] == {None} and cams["synth_garden_kitti"] == {"kitti"}
+
+
+def test_a_trained_baseline_runs_its_fold_on_a_left_out_camera():
+    """run_baseline(..., left_out=camera) calls the function of the fold without that camera."""
+    import torch
+
+    from experiments.real_scenes import run_baseline
+    from somtorch.config import ReductionConfig
+    from somtorch.disparity.scene import scene_from_arrays
+    from somtorch.tasks.baselines import TASK_BASELINES, Obstacle, register_task_baseline
+
+    calls = []
+
+    def boxes_of(tag):
+        def fn(disparity, valid, camera=None):
+            calls.append(tag)
+            return [Obstacle((0, 0, 3, 3), 1.0, 16)]
+        return fn
+
+    register_task_baseline("fold_probe", boxes_of("all"), left_out=lambda cam: boxes_of(f"without {cam}"))
+    try:
+        d = torch.ones(8, 8)
+        scene = scene_from_arrays(d.numpy(), torch.ones(8, 8, dtype=torch.bool).numpy(), name="probe")
+        run_baseline("fold_probe", scene, ReductionConfig())
+        run_baseline("fold_probe", scene, ReductionConfig(), left_out="kitti")
+    finally:
+        TASK_BASELINES.pop("fold_probe")
+    assert calls == ["all", "without kitti"]
+
+
+def test_real_scenes_summary_is_the_protocol_macro_with_its_interval():
+    from experiments.real_scenes import macro_summary
+
+    rows = [{"method": m, "dataset": ds, "group": g, "real": real, "runs": 2, "useful_hits": h}
+            for m, ds, g, real, h in [("learned", "a", "a1", True, 2), ("learned", "a", "a2", True, 0),
+                                      ("learned", "b", "b1", True, 1), ("learned", "b", "b1", True, 1),
+                                      ("learned", "s", "s1", False, 0)]]
+    got = macro_summary(rows, n_boot=200)["learned"]
+    assert got["datasets"] == {"a": 0.5, "b": 0.5, "s": 0.0} and got["frames"] == 5
+    m = got["macro_real"]
+    assert m["useful"] == 0.5 and 0.0 <= m["lo"] <= 0.5 <= m["hi"] <= 1.0 and m["lo"] < m["hi"]
