@@ -106,3 +106,15 @@ def test_real_scenes_summary_is_the_protocol_macro_with_its_interval():
     assert got["datasets"] == {"a": 0.5, "b": 0.5, "s": 0.0} and got["frames"] == 5
     m = got["macro_real"]
     assert m["useful"] == 0.5 and 0.0 <= m["lo"] <= 0.5 <= m["hi"] <= 1.0 and m["lo"] < m["hi"]
+
+
+def test_the_composed_config_is_the_library_default():
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    import experiments.train_baseline  # noqa: F401  (registers the schema)
+    from somtorch.config.learned import LearnedDataConfig, LearnedFitConfig, LearnedModelConfig
+
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = OmegaConf.to_object(compose("train_baseline"))
+    assert cfg.model == LearnedModelConfig() and cfg.data == LearnedDataConfig() and cfg.fit == LearnedFitConfig()
