@@ -272,6 +272,9 @@ def evaluate(cfg: ValidateConfig) -> dict[str, Any]:
     specs = frames(cfg.datasets, cfg.frames)
     if not specs:
         raise ValueError(f"no frame selected (datasets={cfg.datasets}, frames={cfg.frames})")
+    from .validate_baselines import check_trained
+
+    check_trained(cfg.baselines, specs)  # a trained baseline's fold models exist, before any work
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
     grid = {k: list(v) for k, v in cfg.grid.items()}
     for k, v in cfg.neutral.items():  # a knob's neutral value is always tried

@@ -13,9 +13,25 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["baselines_markdown", "score_baselines", "summarize_baselines"]
+__all__ = ["baselines_markdown", "check_trained", "score_baselines", "summarize_baselines"]
 
 log = logging.getLogger("somtorch.validate")
+
+
+def check_trained(names: list[str], specs: list[Any]) -> None:
+    """Before any work: every fold model a trained baseline will need on ``specs`` loads (a function
+    with a ``model()`` loader, like ``learned``'s); a missing one is the loader's one-line error that
+    names the command training it."""
+    from somtorch.tasks.baselines import get_task_baseline
+
+    for name in names:
+        entry = get_task_baseline(name)
+        if entry.left_out is None:
+            continue
+        for cam in sorted({s.camera for s in specs}, key=str):  # None: a frame of no generator camera
+            load = getattr(entry.without(cam).fn, "model", None)
+            if callable(load):
+                load()
 
 
 def score_baselines(caches: list[Any], names: list[str], reduction: Any) -> dict[str, dict[str, Any]]:

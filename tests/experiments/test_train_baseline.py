@@ -118,3 +118,14 @@ def test_the_composed_config_is_the_library_default():
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = OmegaConf.to_object(compose("train_baseline"))
     assert cfg.model == LearnedModelConfig() and cfg.data == LearnedDataConfig() and cfg.fit == LearnedFitConfig()
+
+
+def test_validate_refuses_a_missing_fold_model_before_any_work(tmp_path, shared_data):
+    env = {**os.environ, "SOMTORCH_CACHE": str(tmp_path)}
+    env.pop("HYDRA_FULL_ERROR", None)
+    proc = subprocess.run([sys.executable, "-m", "experiments.validate", "datasets=[kitti2015]", "baselines=[learned]",
+                           f"paths.data_dir={shared_data}", f"hydra.run.dir={tmp_path / 'run'}"], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "somtorch-train-baseline 'data.cameras=[oakd,middlebury]'" in lines[0]
