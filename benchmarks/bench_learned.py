@@ -136,9 +136,10 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="smoke run: quarter-size frames, a tiny model, 2 repeats")
     p.add_argument("--json", metavar="PATH", help="write settings, machine info and all timings here")
+    p.add_argument("--repeats", type=int, default=None, help="timed calls per method and frame (default 7; --quick 2)")
     args = p.parse_args(argv)
     t_start = time.perf_counter()
-    repeats = 2 if args.quick else 7
+    repeats = args.repeats or (2 if args.quick else 7)
     info = common.machine_info()
     frames = load_frames(args.quick)
     model, meta = get_model(args.quick)
