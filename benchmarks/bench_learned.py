@@ -172,9 +172,10 @@ def main(argv: list[str] | None = None) -> int:
           + f"; learned / SOM = {med['learned'] / med['som']:.2f}x")
     params = meta["parameters"]
     from somtorch.baselines.learned.train import estimate
+    from somtorch.config.learned import LearnedFitConfig
 
-    est = estimate(model.cfg, __import__("somtorch.config.learned", fromlist=["x"]).LearnedFitConfig(**meta["fit"]),
-                   train_frames=meta["train_frames"], held_out_frames=meta["held_out_metrics"]["frames"])
+    est = estimate(model.cfg, LearnedFitConfig(**meta["fit"]), train_frames=meta["train_frames"],
+                   held_out_frames=meta["held_out_metrics"]["frames"])
     print(f"\nTraining (from the sidecar, measured when it was trained): {meta['train_s']} s training + "
           f"{meta['prepare_s']} s preparing {meta['train_frames']} frames on {meta['threads']} thread(s) "
           f"(estimate for 2 idle cores: {est.train_s:.0f} s); the SOM trains per frame, inside its time above")
