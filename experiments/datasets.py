@@ -38,7 +38,10 @@ class FrameSpec:
     our default SGBM and ``ndisp`` disparities). ``labels``: a polygon label file under
     ``conf/labels`` giving the objects where the folder has no mask. ``junk``: a synthetic failure
     class (:func:`experiments.scenes.add_junk`). ``group``: the underlying scene (the versions of
-    one scene share it; the protocol's bootstrap resamples groups, not frames).
+    one scene share it; the protocol's bootstrap resamples groups, not frames). ``camera``: the
+    generator camera (:data:`somtorch.synth.CAMERAS`) that stands for the rig the frame was taken
+    with (the dataset's ``camera:`` key; a synthetic frame's own), or None: a trained baseline's
+    leave-one-dataset-out fold leaves that camera's generated frames out of its training.
     """
 
     name: str
@@ -53,6 +56,7 @@ class FrameSpec:
     labels: Optional[str] = None
     group: str = ""
     synthetic: bool = False
+    camera: Optional[str] = None
 
     @property
     def computed(self) -> bool:
@@ -104,7 +108,8 @@ def _labelled_frames(name: str, real: bool, body: dict[str, Any]) -> list[FrameS
             raise ValueError(f"{path}: no right view known for image {left!r}")
         base = scene_folder.lower()
         labels = f"{body['labelled']}/{path.name}"
-        common = {"dataset": name, "real": real, "folder": folder, "labels": labels, "group": base}
+        common = {"dataset": name, "real": real, "folder": folder, "labels": labels, "group": base,
+                  "camera": body.get("camera")}
         out.append(FrameSpec(name=f"mb_{base}", disparity="gt", **common))
         out.append(FrameSpec(name=f"mb_{base}_sgbm", disparity="sgbm", left=left, right=right,
                              ndisp=int(body.get("ndisp", 128)), **common))
@@ -125,7 +130,7 @@ def _synthetic_datasets(body: dict[str, Any]) -> list[DatasetSpec]:
                     specs.append(FrameSpec(
                         name=f"{name}_{seed:02d}" + ("_sgbm" if version == "sgbm" else ""), dataset=name,
                         real=False, folder=folder, disparity="gt" if version == "gt" else "disp_sgbm.pfm",
-                        group=f"{name}_{seed:02d}", synthetic=True))
+                        group=f"{name}_{seed:02d}", synthetic=True, camera=cam))
             out.append(DatasetSpec(name, False, tuple(specs)))
     return out
 
@@ -137,7 +142,7 @@ def _registry() -> tuple[DatasetSpec, ...]:
     doc = yaml.safe_load(REGISTRY.read_text())
     out: list[DatasetSpec] = []
     for name, body in doc.items():
-        _check_keys(name, body, {"real", "frames", "labelled", "folder", "ndisp", "synthetic"})
+        _check_keys(name, body, {"real", "frames", "labelled", "folder", "ndisp", "synthetic", "camera"})
         if not isinstance(body.get("real"), bool):
             raise ValueError(f"{REGISTRY}: dataset {name!r} needs real: true|false")
         real = body["real"]
@@ -149,7 +154,7 @@ def _registry() -> tuple[DatasetSpec, ...]:
             _check_keys(f"{name}.frames[{i}]", d, _FRAME_KEYS)
             d = dict(d)
             d.setdefault("group", d["folder"])
-            specs.append(FrameSpec(dataset=name, real=real, **d))
+            specs.append(FrameSpec(dataset=name, real=real, camera=body.get("camera"), **d))
         if "labelled" in body:
             specs.extend(_labelled_frames(name, real, body))
         out.append(DatasetSpec(name, real, tuple(specs)))

@@ -67,3 +67,7 @@ def video() -> None:
 
 def synth() -> None:
     _go("synth")
+
+
+def train_baseline() -> None:
+    _go("train_baseline")

@@ -23,6 +23,7 @@ USAGE = {
     "synth": "generated stereo frames (GT + SGBM) into the cache (docs/synth.md)",
     "ground_report": "the ground step alone under two ground configs, side by side (a Markdown table)",
     "synth_gallery": "one picture per family of the synthetic generator (docs/gallery/)",
+    "train_baseline": "the learned baseline: a small U-Net trained on generated frames only (docs/validation.md)",
 }
 
 
@@ -177,8 +178,10 @@ def _tool_help(module: str, argv0: str | None) -> str:
 
     from .synth_config import SynthConfig
     from .tool_configs import GroundReportConfig, SynthGalleryConfig
+    from .train_baseline_config import TrainBaselineConfig
 
-    cls = {"synth": SynthConfig, "ground_report": GroundReportConfig, "synth_gallery": SynthGalleryConfig}[module]
+    cls = {"synth": SynthConfig, "ground_report": GroundReportConfig, "synth_gallery": SynthGalleryConfig,
+           "train_baseline": TrainBaselineConfig}[module]
     lines = [f"{prog(module, argv0)} [key=value ...]", f"  {USAGE[module]}", "", f"Keys ({cls.__name__}):"]
     lines += _fields(cls, "")
     hints, desc = typing.get_type_hints(cls), _descriptions(cls)
@@ -196,7 +199,7 @@ def help_text(name: str, argv0: str | None = None) -> str:
 
     groups = config_groups()
     module = "real_scenes" if name == "scenes" else name
-    if module in ("synth", "ground_report", "synth_gallery"):  # not a pipeline run: its own keys only
+    if module in ("synth", "ground_report", "synth_gallery", "train_baseline"):  # not a pipeline run: its own keys only
         return _tool_help(module, argv0)
     lines = [f"{prog(module, argv0)} [group=option ...] [key=value ...]",
              f"  {USAGE.get(module, '')}", "",

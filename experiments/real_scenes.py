@@ -141,16 +141,18 @@ def check_methods(methods: list[str], what: str = "methods") -> None:
         raise ValueError(f"{what}={list(methods)}: unknown {unknown}; choose from {', '.join(known)}")
 
 
-def run_baseline(name: str, scene: Any, reduction: Any) -> list[BaselineRun] | None:
+def run_baseline(name: str, scene: Any, reduction: Any, left_out: str | None = None) -> list[BaselineRun] | None:
     """The task baseline ``name`` (:mod:`somtorch.tasks.baselines`) on ``scene``: its first box, reduced
     with the pipeline's tolerance (``reduction``, a ReductionConfig), scored on the main object. None
     where it does not apply (it needs a metric camera and the scene has none). Nothing found: the
-    whole map is kept and the run is flagged ``no_object``, as the pipeline's fail-safe does."""
+    whole map is kept and the run is flagged ``no_object``, as the pipeline's fail-safe does.
+    ``left_out``: a generator camera whose frames a trained baseline must not have seen (its
+    leave-one-dataset-out fold, :meth:`~somtorch.tasks.baselines.TaskBaseline.without`)."""
     from somtorch.tasks.baselines import get_task_baseline
     from somtorch.tasks.reduction import reduce_map
     from somtorch.tasks.scoring import score_reduction
 
-    baseline = get_task_baseline(name)
+    baseline = get_task_baseline(name).without(left_out)
     if not baseline.applies(scene.camera):
         return None
     found = baseline(scene.disparity, scene.valid, scene.camera)
@@ -202,13 +204,36 @@ def evaluate(cfg: ScenesConfig) -> dict[str, Any]:
                 row = {**head, "mode": "all pixels", "deterministic": get_task_baseline(method).deterministic,
                        **score_scene(scene, runs, cfg)}
             row["wall_s"] = time.perf_counter() - t0
+            row["group"], row["real"] = spec.group, spec.real
             rows.append(row)
             bar.update()
             log.info("%s [%s]: %s", spec.name, method, ", ".join(
                 f"{k} {row[k]}" for k in ("useful_hits", "all_objects_hits", "low_solidity", "no_object") if k in row))
     bar.close()
     return {"schema": SCHEMA, "label": cfg.label, "datasets": cfg.datasets, "rows": rows,
-            "config": OmegaConf.to_container(OmegaConf.structured(cfg))}
+            "summary": macro_summary(rows), "config": OmegaConf.to_container(OmegaConf.structured(cfg))}
+
+
+def macro_summary(rows: list[dict[str, Any]], n_boot: int = 2000) -> dict[str, Any]:
+    """Per method: the useful-hit rate per dataset and its macro average over the real datasets with
+    the protocol's 95 % bootstrap interval (:class:`experiments.protocol.FrameTable`: frames weighted
+    through their scenes, the scenes resampled), over the masked frames every method scored."""
+    import numpy as np
+
+    from .protocol import FrameTable
+
+    out: dict[str, Any] = {}
+    for method in dict.fromkeys(r["method"] for r in rows):
+        got = [r for r in rows if r["method"] == method and "useful_hits" in r]
+        if not got:
+            continue
+        table = FrameTable([r["dataset"] for r in got], [r["group"] for r in got], [r["real"] for r in got],
+                           n_boot=n_boot)
+        rate = np.array([r["useful_hits"] / r["runs"] for r in got])
+        point, lo, hi = table.macro(rate, real_only=True)
+        out[method] = {"frames": len(got), "datasets": table.per_dataset(rate),
+                       "macro_real": {"useful": point, "lo": lo, "hi": hi}}
+    return out
 
 
 def to_markdown(results: dict[str, Any]) -> str:
@@ -216,6 +241,14 @@ def to_markdown(results: dict[str, Any]) -> str:
     masked = [r for r in results["rows"] if "useful_hits" in r]
     other = [r for r in results["rows"] if "useful_hits" not in r]
     lines = []
+    if results.get("summary"):
+        lines += ["| method | frames | macro useful, real [95 % interval] | per dataset |", "|---|---|---|---|"]
+        for method, m in results["summary"].items():
+            mr = m["macro_real"]
+            per = ", ".join(f"{d} {100 * v:.1f}" for d, v in m["datasets"].items())
+            lines.append(f"| {results['label'] if method == 'som' else method} | {m['frames']} | "
+                         f"{100 * mr['useful']:.1f} [{100 * mr['lo']:.1f}, {100 * mr['hi']:.1f}] | {per} |")
+        lines.append("")
     if masked:
         lines += ["| scene | method | mode | runs | ≥95 % identified | 100 % | useful hits | all-objects hits | "
                   "no object | mean reduction (≥95 % runs) | x_opt | F-measure | MAE | S-measure |",

@@ -285,6 +285,9 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     missing = missing_corpus(specs)  # a fresh clone: the generated frames are not there yet
     if missing is not None:
         raise FileNotFoundError(missing)
+    from .validate_baselines import check_trained
+
+    check_trained(cfg.baselines, specs)  # a trained baseline's fold models exist, before any work
     data_dir = Path(to_absolute_path(cfg.paths.data_dir))
     grid = {k: list(v) for k, v in cfg.grid.items()}
     for k, v in cfg.neutral.items():  # a knob's neutral value is always tried

@@ -1,6 +1,8 @@
 """The task baselines in ``python -m experiments.validate`` (``baselines=``): one run per frame
 (they are deterministic), scored like the SOM's defaults and reported beside them, per dataset and
-as the real / all macro averages (split from :mod:`experiments.validate`)."""
+as the real / all macro averages (split from :mod:`experiments.validate`). A trained baseline
+(``learned``) runs, on each frame, the model of the frame's fold: trained without the generated
+frames of the frame's camera (``FrameSpec.camera``), so a left-out dataset's rig is never trained on."""
 
 from __future__ import annotations
 
@@ -11,9 +13,25 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["baselines_markdown", "score_baselines", "summarize_baselines"]
+__all__ = ["baselines_markdown", "check_trained", "score_baselines", "summarize_baselines"]
 
 log = logging.getLogger("somtorch.validate")
+
+
+def check_trained(names: list[str], specs: list[Any]) -> None:
+    """Before any work: every fold model a trained baseline will need on ``specs`` loads (a function
+    with a ``model()`` loader, like ``learned``'s); a missing one is the loader's one-line error that
+    names the command training it."""
+    from somtorch.tasks.baselines import get_task_baseline
+
+    for name in names:
+        entry = get_task_baseline(name)
+        if entry.left_out is None:
+            continue
+        for cam in sorted({s.camera for s in specs}, key=str):  # None: a frame of no generator camera
+            load = getattr(entry.without(cam).fn, "model", None)
+            if callable(load):
+                load()
 
 
 def score_baselines(caches: list[Any], names: list[str], reduction: Any) -> dict[str, dict[str, Any]]:
@@ -29,7 +47,7 @@ def score_baselines(caches: list[Any], names: list[str], reduction: Any) -> dict
         scene, per = c.fresh_scene(), {}  # (not kept: 352 frames' maps would stay in memory)
         for name in names:
             t0 = time.perf_counter()
-            runs = run_baseline(name, scene, reduction)
+            runs = run_baseline(name, scene, reduction, left_out=c.spec.camera)  # a trained one: its fold
             if runs is None:
                 per[name] = None
                 continue

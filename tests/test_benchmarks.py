@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("script", ["bench_core.py", "bench_pipeline.py"])
+@pytest.mark.parametrize("script", ["bench_core.py", "bench_pipeline.py", "bench_learned.py"])
 def test_benchmark_quick_run_writes_its_results(script, tmp_path):
     out = tmp_path / "r.json"
     proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), "--quick", "--json", str(out)],

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from experiments.tool_configs import GroundReportConfig, SynthGalleryConfig
+from experiments.train_baseline_config import TrainBaselineConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -61,7 +62,8 @@ def test_synth_gallery_draws_one_picture_per_family(tmp_path):
 
 
 @pytest.mark.parametrize("module, schema", [("ground_report", GroundReportConfig),
-                                            ("synth_gallery", SynthGalleryConfig)])
+                                            ("synth_gallery", SynthGalleryConfig),
+                                            ("train_baseline", TrainBaselineConfig)])
 def test_help_lists_every_key_without_torch(module, schema):
     from experiments.cli import field_types
 

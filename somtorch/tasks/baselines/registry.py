@@ -21,9 +21,11 @@ Register a new baseline once, where it is implemented::
 whose baseline is in m or mm); where a scene has none, the runners skip it (a logged line, no row).
 ``deterministic=False``: the result may change from one call to the next (e.g. a network on a GPU);
 the runners still run it once per frame, and the rows say ``deterministic: false``.
+``left_out=fn_of(camera)``: a trained baseline's fold without a generator camera's frames; the
+validation's leave-one-dataset-out uses it for a dataset taken with that camera (:meth:`TaskBaseline.without`).
 
-The built-in baselines (``uv_disparity``, ``dsw``, ``plane_components``, ``plane_components_o3d``)
-register when :mod:`somtorch.tasks.baselines` is imported.
+The built-in baselines (``uv_disparity``, ``dsw``, ``plane_components``, ``plane_components_o3d``,
+``learned``) register when :mod:`somtorch.tasks.baselines` is imported.
 """
 
 from __future__ import annotations
@@ -68,12 +70,23 @@ class TaskBaseline:
         fn: ``fn(disparity, valid, camera=None) -> list[Obstacle]``, best first.
         needs_camera: needs a metric camera; skipped on scenes without one.
         deterministic: the same input always gives the same boxes.
+        left_out: for a trained baseline, ``left_out(camera) -> fn``: the function of the model
+            trained without that generator camera's frames (the leave-one-dataset-out fold of a
+            dataset taken with it); None for a baseline that learns nothing.
     """
 
     name: str
     fn: BaselineFn
     needs_camera: bool = False
     deterministic: bool = True
+    left_out: Callable[[str], BaselineFn] | None = None
+
+    def without(self, camera: str | None) -> TaskBaseline:
+        """The baseline of the fold that leaves out ``camera``'s frames (itself when it learns
+        nothing or ``camera`` is None)."""
+        if self.left_out is None or camera is None:
+            return self
+        return TaskBaseline(self.name, self.left_out(camera), self.needs_camera, self.deterministic)
 
     def applies(self, camera: Any) -> bool:
         """True unless the baseline needs a metric camera and ``camera`` is not one."""
@@ -98,7 +111,8 @@ TASK_BASELINES: dict[str, TaskBaseline] = {}
 
 
 def register_task_baseline(name: str, fn: BaselineFn, *, needs_camera: bool = False,
-                           deterministic: bool = True) -> TaskBaseline:
+                           deterministic: bool = True,
+                           left_out: Callable[[str], BaselineFn] | None = None) -> TaskBaseline:
     """Register ``fn`` as the task baseline ``name`` (see the module docstring); returns its entry.
 
     Raises:
@@ -110,7 +124,7 @@ def register_task_baseline(name: str, fn: BaselineFn, *, needs_camera: bool = Fa
     old = TASK_BASELINES.get(name)
     if old is not None and old.fn is not fn:
         raise ValueError(f"task baseline {name!r} is already registered (by {old.fn.__module__}.{old.fn.__qualname__})")
-    entry = TaskBaseline(name, fn, bool(needs_camera), bool(deterministic))
+    entry = TaskBaseline(name, fn, bool(needs_camera), bool(deterministic), left_out)
     TASK_BASELINES[name] = entry
     return entry
 
