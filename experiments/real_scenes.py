@@ -233,11 +233,11 @@ def main(dcfg: DictConfig) -> dict:
     from .cli import configure_threads
 
     configure_threads()
-    from .schema import one_line_errors
+    from .schema import one_line_errors, to_config
     from somtorch.atomic import write_staged
 
     with one_line_errors(log):
-        cfg: ScenesConfig = OmegaConf.to_object(dcfg)
+        cfg: ScenesConfig = to_config(dcfg)
         out = Path(HydraConfig.get().runtime.output_dir)
         results = evaluate(cfg)
     write_staged(out, {"results.md": to_markdown(results).encode(), "metrics.json": results})

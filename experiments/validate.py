@@ -417,12 +417,12 @@ def main(dcfg: DictConfig) -> int:
     from .cli import configure_threads, interruptible, marked_if_failed
 
     configure_threads()
-    from .schema import one_line_errors
+    from .schema import one_line_errors, to_config
     from somtorch.atomic import write_staged
 
     out = Path(HydraConfig.get().runtime.output_dir)
     with marked_if_failed(out), interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
-        cfg: ValidateConfig = OmegaConf.to_object(dcfg)
+        cfg: ValidateConfig = to_config(dcfg)
         report = evaluate(cfg)
     write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": report})
     m = report["summary"]["macro_real"]
