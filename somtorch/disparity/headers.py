@@ -88,6 +88,8 @@ def check_cost(path: Path, what: str, *, pixels: int, decoded: int, held: int, r
 def map_shape(path: Path, shape: tuple[int, ...], dtype: np.dtype) -> tuple[int, int]:
     """``(H, W)`` of an array of ``shape`` and ``dtype`` that is a disparity map: 2-D (or
     ``(H, W, 1)``), not empty, real numbers; else DataFileError."""
+    if any(s < 0 for s in shape):
+        raise DataFileError(path, f"the header claims a negative size: shape {shape}")
     if len(shape) == 3 and shape[2] == 1:
         shape = shape[:2]
     if len(shape) != 2:

@@ -160,3 +160,11 @@ def test_real_files_read_byte_for_byte_as_the_whole_array_conversion():
         disp, valid = read_disparity(f, scale=None if raw.dtype != np.uint8 else scale)
         ref_d, ref_v = _reference(raw, scale, f.suffix == ".png")
         assert disp.numpy().tobytes() == ref_d.tobytes() and np.array_equal(valid.numpy(), ref_v), f
+
+
+def test_a_negative_shape_in_an_npy_header_names_the_file(tmp_path):  # found by the fuzzer
+    header = "{'descr': '<f4', 'fortran_order': False, 'shape': (-3, -4), }"
+    path = tmp_path / "neg.npy"
+    path.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode() + bytes(48))
+    with pytest.raises(DataFileError, match=r"neg\.npy: the header claims a negative size"):
+        read_disparity(path)
