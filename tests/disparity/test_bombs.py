@@ -20,8 +20,6 @@ from somtorch.disparity.io import read_disparity
 from somtorch.disparity.pfm import write_pfm
 from tests.fuzz import bombs
 
-DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
-
 # each bomb: its builder and what the refusal says
 BOMBS = {
     "zeros.npz": (lambda p: bombs.npz_zeros(p, 4000, 4000), r"zeros\.npz: array 'disparity'.*compression ratio"),
@@ -143,10 +141,9 @@ def _reference(raw: np.ndarray, scale: float, zero_is_invalid: bool) -> tuple[np
     return np.where(valid, values, 0.0).astype(np.float32), valid
 
 
-def test_real_files_read_byte_for_byte_as_the_whole_array_conversion():
-    files = sorted(DATA.glob("**/disp*.p*"))
-    if not files:
-        pytest.skip(f"no real disparity files under {DATA} (../shared/data)")
+def test_real_files_read_byte_for_byte_as_the_whole_array_conversion(shared_data):
+    files = sorted(shared_data.glob("**/disp*.p*"))
+    assert len(files) > 50
     for f in files:
         if f.suffix == ".pfm":
             head = f.read_bytes()
