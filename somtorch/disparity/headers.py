@@ -11,7 +11,7 @@ which refuses with a :class:`~somtorch.validation.DataFileError` naming the file
 * more bytes than the resource guard's memory budget (:func:`memory_budget`: the default
   ``resources.max_memory_frac`` of the memory available, :func:`somtorch.resources.available_memory`).
 
-:data:`MAX_RATIO` comes from the 66 disparity maps of ``../shared/data`` (measured by
+:data:`MAX_RATIO` comes from the 70 disparity maps (66 PNG, 4 PFM) of ``../shared/data`` (measured by
 ``benchmarks/bench_readers.py --ratios``): the most compressible one (Middlebury 2006 ``Wood2/disp1.png``)
 is 12.7:1 as its own PNG, 15:1 at its stored uint8 in an NPZ or a deflate TIFF, 45:1 as float32 and
 69:1 as float64 (what ``np.zeros`` and most NumPy code write); the median map is 35:1 as float64.
