@@ -106,3 +106,15 @@ def test_a_hostile_table1_sweep_is_refused_before_any_job_runs(tmp_path, bad):
     assert "31 more job(s) refused too; no job of the sweep was run" in errors[0]
     sweep = tmp_path / "out" / "studies" / "table1"
     assert not [d for d in sweep.iterdir() if d.is_dir()] if sweep.exists() else True  # no job folder
+
+
+def test_a_bad_job_refuses_a_basic_launcher_sweep_before_any_job_runs(tmp_path):
+    # another launcher than somtorch's: the study's callback checks every job's config first
+    p = _cli("-m", "hydra/launcher=basic", f"paths.output_dir={tmp_path}", "study=l", "ensemble=2",
+             "output.maps=false", "output.tensorboard=false", "train.epochs=3,0", module="study")
+    assert p.returncode == 2, p.stderr
+    errors = [line for line in p.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and "Traceback" not in p.stderr, p.stderr
+    assert errors[0].startswith("error: job #1 (") and "train.epochs must be an integer" in errors[0], errors
+    assert "no job of the sweep was run" in errors[0]
+    assert not list(tmp_path.glob("studies/l/*/metrics.json")) and not list(tmp_path.glob("studies/l/*/FAILED"))
