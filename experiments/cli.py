@@ -35,6 +35,24 @@ def field_types(schema: type, prefix: str = "") -> dict[str, Any]:
     return out
 
 
+FINITE_HINT = "NaN and infinities are not config values, in any spelling"
+
+
+def _finite(v: Any, text: str) -> bool:
+    """False for a NaN or infinity, as YAML reads it (``.nan``, ``-.inf``) or as Hydra and
+    OmegaConf would (``nan``, ``inf``, ``1e999``, ``Infinity``)."""
+    import math
+
+    if isinstance(v, float):
+        return math.isfinite(v)
+    if isinstance(v, str):
+        try:
+            return math.isfinite(float(v.strip()))
+        except ValueError:
+            return True  # not a number at all: the type check says so
+    return True
+
+
 def _value_error(key: str, value: str, t: Any) -> str | None:
     """A one-line complaint when ``value`` cannot be a ``t`` (int / float / bool, optionally None)."""
     import yaml
@@ -52,8 +70,13 @@ def _value_error(key: str, value: str, t: Any) -> str | None:
             v = yaml.safe_load(part)
         except yaml.YAMLError:
             v = part
+        if isinstance(v, str) and base is float:  # 1e3: a string to YAML 1.1, a float to Hydra
+            with contextlib.suppress(ValueError):
+                v = float(part)
         if v is None and optional:
             continue
+        if base is not bool and not _finite(v, part):
+            return f"{key}={part}: expected a finite number ({FINITE_HINT})"
         ok = (isinstance(v, bool) if base is bool else
               isinstance(v, int) and not isinstance(v, bool) if base is int else
               isinstance(v, (int, float)) and not isinstance(v, bool))
@@ -104,7 +127,13 @@ def check_overrides(argv: list[str], schema: type) -> str | None:
     types = field_types(schema)
     groups = config_groups()
     for arg in argv:
-        if arg.startswith("-") or "=" not in arg or arg[0] in "+~":
+        if arg.startswith("-") or "=" not in arg or arg[0] == "~":
+            continue
+        if arg[0] == "+":  # appended or forced keys are Hydra's to place; their values are checked here
+            key, value = arg.lstrip("+").split("=", 1)
+            bad = _value_error(key, value, types[key]) if key in types else None
+            if bad:
+                return bad
             continue
         key, value = arg.split("=", 1)
         if key.startswith("hydra") or "@" in key or "/" in key:

@@ -284,12 +284,12 @@ def main(dcfg: DictConfig) -> dict:
     from .cli import configure_threads, interruptible, marked_if_failed
 
     configure_threads()
-    from .schema import one_line_errors
+    from .schema import one_line_errors, to_config
     from somtorch.atomic import write_staged
 
     out = Path(HydraConfig.get().runtime.output_dir)
     with marked_if_failed(out), interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
-        cfg: ScenesConfig = OmegaConf.to_object(dcfg)
+        cfg: ScenesConfig = to_config(dcfg)
         results = evaluate(cfg)
     write_staged(out, {"results.md": to_markdown(results).encode(), "metrics.json": results})
     log.info("tables in %s", out / "results.md")

@@ -243,7 +243,7 @@ def main(dcfg: DictConfig) -> dict:
 
     configure_threads()
     from .cli import interruptible, marked_if_failed, quiet
-    from .schema import one_line_errors
+    from .schema import one_line_errors, to_config
     from somtorch.locks import exclusive_folder
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
@@ -254,7 +254,7 @@ def main(dcfg: DictConfig) -> dict:
                 h.setLevel(logging.WARNING)
     # an error or a refusal: one line, FAILED; Ctrl-C / kill: one line, FAILED, 130 / 143
     with marked_if_failed(out_dir), interruptible(out_dir), one_line_errors(log):
-        cfg: RunConfig = OmegaConf.to_object(dcfg)  # validates types and dataclass rules
+        cfg: RunConfig = to_config(dcfg)  # validates types and dataclass rules
         out_dir.mkdir(parents=True, exist_ok=True)
         with exclusive_folder(out_dir):  # two runs never write into one folder
             return execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))

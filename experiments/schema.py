@@ -12,6 +12,7 @@ import logging
 import os
 import sys
 from collections.abc import Iterator
+from typing import Any
 from dataclasses import dataclass, field
 
 from hydra.core.config_store import ConfigStore
@@ -108,6 +109,21 @@ def register() -> None:
     from hydra_plugins.somtorch_launcher.launcher import SomtorchLauncher
 
     Plugins.instance().register(SomtorchLauncher)
+
+
+def to_config(dcfg: Any) -> Any:
+    """A composed config as its dataclasses (their rules checked), after refusing a NaN or an
+    infinity anywhere in it (a YAML ``.nan`` in a preset, an interpolation): ValueError, one line."""
+    from omegaconf import OmegaConf
+
+    from somtorch.config.constraints import nonfinite
+
+    from .cli import FINITE_HINT
+
+    bad = nonfinite(OmegaConf.to_container(dcfg, resolve=True))
+    if bad is not None:
+        raise ValueError(f"{bad[0]}={bad[1]}: expected a finite number ({FINITE_HINT})")
+    return OmegaConf.to_object(dcfg)
 
 
 def log_to_file(log: logging.Logger, level: int, msg: str, *args: object) -> None:

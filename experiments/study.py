@@ -298,12 +298,12 @@ def _write_tensorboard(writer, cfg: StudyConfig, metrics: dict[str, Any]) -> Non
 def main(dcfg: DictConfig) -> float:
     """Hydra entry point; returns the job's objective (``summary.tradeoff``; 0 without an object mask)."""
     from .cli import configure_threads, interruptible, marked_if_failed
-    from .schema import one_line_errors
+    from .schema import one_line_errors, to_config
 
     configure_threads()
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     with marked_if_failed(out_dir), interruptible(out_dir), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED in the job's folder
-        cfg: StudyConfig = OmegaConf.to_object(dcfg)
+        cfg: StudyConfig = to_config(dcfg)
         metrics = execute(cfg, out_dir, OmegaConf.to_container(dcfg, resolve=True))
     return float(metrics["summary"].get("tradeoff", 0.0))
 

@@ -4,8 +4,9 @@ The default launcher (``hydra/launcher=somtorch``, ``hydra_plugins/somtorch_laun
 number of jobs, a rough time estimate with its worker count and the largest peak memory, then counts
 the jobs with a bar; it asks :func:`job_estimate` about each job (its scene read once per data set,
 :func:`somtorch.pipeline.resource_estimate` times its runs). With another launcher (basic, joblib,
-Ray, SLURM) the callback :class:`StudyProgress` (``conf/study.yaml``) prints the same line, summed
-over the jobs, and a bar when the jobs run in this process. Inside a job the training bar counts
+Ray, SLURM) the callback :class:`StudyProgress` (``conf/study.yaml``) first checks every job's
+config (:func:`refuse_bad_jobs`: one bad job ends the sweep in one line before any runs), then
+prints the same line, summed over the jobs, and a bar when the jobs run in this process. Inside a job the training bar counts
 the epochs (steps of the online rule) and, with ``execution=separate``, a bar counts the runs. Every
 bar is off with ``--quiet``, when stderr is not a terminal, and in the launcher's workers
 (``experiments.cli.show_progress``).
@@ -93,6 +94,29 @@ def estimate_jobs(config: DictConfig, jobs: list[list[str]]) -> tuple[float, int
     return seconds, peak, done
 
 
+def refuse_bad_jobs(config: DictConfig, jobs: list[list[str]]) -> None:
+    """Compose every job's config and check it (schema, rules, no NaN / infinity: the somtorch
+    launcher's check) before any job runs; a bad one ends the sweep in one line, exit status 2."""
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra_plugins.somtorch_launcher._workers import config_error
+
+    loader = GlobalHydra.instance().config_loader()
+    refused = []
+    for i, job in enumerate(jobs):
+        try:
+            why = config_error(loader.load_sweep_config(config, list(job)))
+        except Exception:  # noqa: BLE001 - a job Hydra cannot compose fails with Hydra's message when it runs
+            why = None
+        if why is not None:
+            refused.append((i, job, why))
+    if refused:
+        i, job, why = refused[0]
+        more = f"; {len(refused) - 1} more job(s) refused too" if len(refused) > 1 else ""
+        print(f"error: job #{i} ({' '.join(job)}): {why}{more}; no job of the sweep was run", file=sys.stderr,
+              flush=True)
+        raise SystemExit(2)
+
+
 class StudyProgress(Callback):
     """Job count and time estimate first, then a progress bar across the jobs."""
 
@@ -109,6 +133,7 @@ class StudyProgress(Callback):
         from somtorch.resources import fmt_bytes, fmt_seconds
 
         jobs = sweep_jobs(config)
+        refuse_bad_jobs(config, jobs)
         seconds, peak, done = estimate_jobs(config, jobs)
         if done:
             est = (f"estimated ~{fmt_seconds(seconds)} in all (rough: from the sizes of {done} job(s)), "

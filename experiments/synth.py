@@ -105,10 +105,10 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="synth")
 def main(dcfg: DictConfig) -> dict:
     from .cli import show_progress
-    from .schema import one_line_errors
+    from .schema import one_line_errors, to_config
 
     with one_line_errors(log):
-        cfg: SynthConfig = OmegaConf.to_object(dcfg)
+        cfg: SynthConfig = to_config(dcfg)
         return generate(cfg, progress=show_progress())
 
 

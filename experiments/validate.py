@@ -44,7 +44,7 @@ import numpy as np
 from hydra.core.config_store import ConfigStore
 from hydra.core.hydra_config import HydraConfig
 from hydra.utils import to_absolute_path
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from . import CONF
 from .schema import RunConfig, register
@@ -454,14 +454,14 @@ def main(dcfg: DictConfig) -> int:
     from .cli import configure_threads, interruptible, marked_if_failed
 
     configure_threads()
-    from .schema import one_line_errors
+    from .schema import one_line_errors, to_config
     from somtorch.atomic import write_staged
 
     out = Path(HydraConfig.get().runtime.output_dir)
     from .warning_log import warnings_to_file
 
     with marked_if_failed(out), interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
-        cfg: ValidateConfig = OmegaConf.to_object(dcfg)
+        cfg: ValidateConfig = to_config(dcfg)
         with warnings_to_file(out / "runs.log", "validate"):  # thousands of runs: their warnings in a file
             report = evaluate(cfg, out / "runs.log")
     write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": report})

@@ -103,7 +103,7 @@ def main(dcfg: DictConfig) -> dict:
 
     configure_threads()
     from .cli import interruptible, marked_if_failed
-    from .schema import one_line_errors
+    from .schema import one_line_errors, to_config
     from somtorch import interrupt
     from somtorch.atomic import commit_staged, write_json
     from somtorch.outputs import SequenceWriter
@@ -111,7 +111,7 @@ def main(dcfg: DictConfig) -> dict:
 
     out = Path(HydraConfig.get().runtime.output_dir)
     with marked_if_failed(out), interruptible(out), one_line_errors(log):  # Ctrl-C / kill: one line, FAILED, 130 / 143
-        cfg: VideoConfig = OmegaConf.to_object(dcfg)
+        cfg: VideoConfig = to_config(dcfg)
         s = cfg.sequence
         runner = SequenceRunner(cfg, warm=s.warm, warm_epochs=s.warm_epochs, warm_sigma=s.warm_sigma,
                                 ground_keep=s.ground_keep, ground_every=s.ground_every)

@@ -90,14 +90,45 @@ def estimate(fn: Optional[Callable[[DictConfig], Any]], cfg: DictConfig) -> Opti
     return None if est is None else (float(est[0]), int(est[1]))
 
 
+def config_error(cfg: DictConfig) -> Optional[str]:
+    """Why a composed job's config is refused, in one line, or None: its schema's types and rules
+    (the dataclasses built as the job builds them) and no NaN or infinity anywhere."""
+    from omegaconf import OmegaConf
+    from omegaconf.errors import InterpolationResolutionError, OmegaConfBaseException
+
+    from somtorch.config.constraints import nonfinite
+
+    job = cfg.copy()
+    with open_dict(job):
+        del job["hydra"]  # its ${hydra:...} values need a running job
+    try:
+        tree = OmegaConf.to_container(job, resolve=True)
+        bad = nonfinite(tree)
+        if bad is not None:
+            return f"{bad[0]}={bad[1]}: expected a finite number (NaN and infinities are not config values)"
+        if OmegaConf.get_type(job) is not dict:  # a structured config: build it, its rules run
+            OmegaConf.to_object(job)
+    except InterpolationResolutionError:  # a value only a running job can resolve: the job will say
+        return None
+    except (ValueError, TypeError, OmegaConfBaseException) as e:
+        text = str(e).strip()
+        return text.splitlines()[0] if text else type(e).__name__
+    except Exception:  # noqa: BLE001 - not a config problem (an import, a resolver): the job will say
+        return None
+    return None
+
+
 def plan_jobs(loader: Any, master: DictConfig, items: Sequence[tuple[int, Sequence[str]]],
-              estimate_path: Optional[str]) -> list[tuple[int, DictConfig, Optional[tuple[float, int]]]]:
-    """Compose and estimate the jobs ``items`` = [(idx, overrides)]: [(idx, config, estimate)]."""
+              estimate_path: Optional[str]
+              ) -> list[tuple[int, DictConfig, Optional[tuple[float, int]], Optional[str]]]:
+    """Compose, check and estimate the jobs ``items`` = [(idx, overrides)]: [(idx, config,
+    estimate, why the config is refused or None)]."""
     fn = locate(estimate_path)
     out = []
     for idx, overrides in items:
         cfg = compose(loader, master, idx, overrides)
-        out.append((idx, cfg, estimate(fn, cfg)))
+        error = config_error(cfg)
+        out.append((idx, cfg, None if error else estimate(fn, cfg), error))
     return out
 
 
@@ -192,8 +223,8 @@ class Pool:
 
     # ------------------------------------------------------------------ planning
     def plan(self, items: list[tuple[int, Sequence[str]]], master: DictConfig, estimate_path: Optional[str]
-             ) -> list[tuple[int, DictConfig, Optional[tuple[float, int]]]]:
-        """[(idx, config, estimate)] of ``items`` = [(idx, overrides)], in their order, composed by the
+             ) -> list[tuple[int, DictConfig, Optional[tuple[float, int]], Optional[str]]]:
+        """[(idx, config, estimate, refusal)] of ``items`` = [(idx, overrides)], in their order, composed by the
         workers in contiguous shares (consecutive jobs usually share a scene, which each reads once);
         a share whose worker fails or dies is composed here."""
         from multiprocessing.connection import wait

@@ -5,8 +5,10 @@ The default launcher of ``somtorch-study`` (``conf/study.yaml``). Before the fir
 1. measures the cores free to this process (its affinity mask and cgroup quota, less what other
    processes keep busy over 60 ms) and starts that many spawned workers (``n_jobs`` if given;
    negative counts as joblib does: −1 = every core; at most the number of jobs);
-2. has them compose every job's config (contiguous shares, as Hydra's sweepers compose them; a
-   share a worker cannot compose is composed here, with its error) and ask ``estimate`` (a
+2. has them compose and check every job's config (contiguous shares, as Hydra's sweepers compose
+   them; a share a worker cannot compose is composed here, with its error): a job whose config
+   its schema refuses, or that holds a NaN or an infinity, refuses the whole sweep in one line,
+   exit status 2, before any job runs; then they ask ``estimate`` (a
    function named by its dotted path, called with a job's composed config without its ``hydra``
    node; it returns ``(seconds, peak_bytes)`` or None) about each job: ~90 ms of Hydra a job,
    spread over the workers while they are needed for nothing else;
@@ -172,8 +174,15 @@ class SomtorchLauncher(Launcher):
         try:
             planned = (pool.plan(items, self.config, self.estimate) if pool is not None
                        else plan_jobs(self.hydra_context.config_loader, self.config, items, self.estimate))
-            configs = [cfg for _, cfg, _ in planned]
-            plan = self._plan(configs, [est for _, _, est in planned], free)
+            refused = [(cfg, why) for _, cfg, _, why in planned if why is not None]
+            if refused:  # one bad job refuses the sweep before any job runs
+                cfg, why = refused[0]
+                more = f"; {len(refused) - 1} more job(s) refused too" if len(refused) > 1 else ""
+                print(f"error: job #{cfg.hydra.job.num} ({' '.join(filter_overrides(cfg.hydra.overrides.task))}): "
+                      f"{why}{more}; no job of the sweep was run", file=sys.stderr, flush=True)
+                raise SystemExit(2)
+            configs = [cfg for _, cfg, _, _ in planned]
+            plan = self._plan(configs, [est for _, _, est, _ in planned], free)
             for cfg in configs:
                 with open_dict(cfg):
                     cfg.hydra.launcher.n_jobs = plan.workers  # the job's thread share (experiments.cli.launcher_jobs)

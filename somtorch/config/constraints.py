@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 from typing import Any, ClassVar
 
 __all__ = ["BOOL", "FRACTION", "NON_NEGATIVE", "POSITIVE", "POSITIVE_INT", "Choice", "Flag", "Interval", "OneOf",
-           "Validated"]
+           "Validated", "nonfinite"]
 
 
 @dataclass(frozen=True)
@@ -126,3 +126,23 @@ class Validated:
     def as_dict(self) -> dict[str, Any]:
         """The config as a plain dict (nested configs included)."""
         return asdict(self)  # type: ignore[call-overload]
+
+
+def nonfinite(tree: Any, prefix: str = "") -> tuple[str, float] | None:
+    """``(dotted key, value)`` of the first NaN or infinite number in a tree of dicts and lists (a
+    config as plain containers), or None: no config value is meant to be NaN or infinite.
+
+    >>> nonfinite({"train": {"lr": float("nan")}, "grid": [1, 2]})
+    ('train.lr', nan)
+    """
+    if isinstance(tree, dict):
+        items: Any = ((f"{prefix}{k}", v) for k, v in tree.items())
+    elif isinstance(tree, (list, tuple)):
+        items = ((f"{prefix[:-1]}[{i}]", v) for i, v in enumerate(tree))
+    else:
+        return (prefix[:-1], tree) if isinstance(tree, float) and not math.isfinite(tree) else None
+    for key, value in items:
+        found = nonfinite(value, f"{key}.")
+        if found is not None:
+            return found
+    return None

@@ -20,10 +20,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import tokenize
-import zipfile
-import zlib
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +27,16 @@ import cv2
 import numpy as np
 import torch
 
+from somtorch.disparity.headers import (
+    DEFLATE_RATIO,
+    MAX_RATIO,
+    OUT_BYTES_PER_PX,
+    check_png,
+    map_shape,
+    tiff_cost,
+    tiff_header,
+)
+from somtorch.disparity.npyfile import CHUNK_ITEMS, Stream, read_npy, read_npz
 from somtorch.disparity.pfm import read_pfm, write_pfm
 from somtorch.validation import DataFileError, require_file
 
@@ -50,7 +56,6 @@ log = logging.getLogger(__name__)
 DISPARITY_SUFFIXES: tuple[str, ...] = (".pfm", ".png", ".npy", ".npz", ".tif", ".tiff")
 """File suffixes :func:`read_disparity` understands."""
 
-_NPZ_KEYS = ("disparity", "disp")
 _PNG16_SCALE = 1.0 / 256.0  # KITTI / OAK-D convention: d = value / 256
 
 
@@ -66,6 +71,10 @@ def read_disparity(
     the paper), equal to ``invalid_value`` (compared with the stored value, before ``scale``), or — for
     PNG, where ``0`` codes "no disparity" — zero.
 
+    The header is checked before any pixel is decoded (:mod:`somtorch.disparity.headers`: the pixel
+    limit, a compression ratio real maps have, the memory budget); ``.npy`` / ``.npz`` / ``.pfm``
+    data is converted as it is read, so the read holds at most about twice the arrays it returns.
+
     Args:
         path: ``.pfm``, ``.png`` (single channel), ``.npy``, ``.npz`` or float ``.tif`` / ``.tiff`` file.
         scale: multiplier from stored values to pixels. Default: ``1/256`` for 16-bit PNG (KITTI,
@@ -79,7 +88,8 @@ def read_disparity(
     Raises:
         ValueError: unknown suffix (the message lists the supported ones).
         FileNotFoundError: ``path`` does not exist.
-        DataFileError: the file cannot be decoded, is not a 2-D map, or is an 8-bit PNG without ``scale``.
+        DataFileError: the file cannot be decoded, is not a 2-D map, is an 8-bit PNG without ``scale``,
+            or its header promises more pixels, memory or compression than a real map has.
 
     Shape:
         - disparity: :math:`(H, W)`, float32.
@@ -94,40 +104,70 @@ def read_disparity(
         raise ValueError(f"scale must be a finite number > 0 (stored value * scale = pixels); got {scale!r}")
     path = require_file(path, "disparity file")
     zero_is_invalid = False
+    source: np.ndarray | Stream
     if suffix == ".pfm":
-        raw: np.ndarray = read_pfm(path)[0]
+        source = read_pfm(path)[0]
     elif suffix == ".png":
-        raw = _read_png_disparity(path, scale)
+        source = _read_png_disparity(path, scale)
         zero_is_invalid = True
         if scale is None:
             scale = _PNG16_SCALE
     elif suffix == ".npy":
-        raw = _load_npy(path)
+        source = read_npy(path)
     elif suffix in (".tif", ".tiff"):
-        raw = _read_tiff_disparity(path, scale)
+        source = _read_tiff_disparity(path, scale)
     else:
-        raw = _load_npz(path)
-    raw = _as_2d_numeric(path, raw)
-    values = raw.astype(np.float64) * (1.0 if scale is None else scale)  # (H, W)
-    with np.errstate(over="ignore"):  # values beyond float32 become inf there: invalid, not a huge disparity
-        valid = np.isfinite(values.astype(np.float32)) & (values >= 0)
-    if zero_is_invalid:
-        valid &= raw != 0
-    if invalid_value is not None:
-        valid &= raw != invalid_value
-    disparity = np.where(valid, values, 0.0).astype(np.float32)
+        source = read_npz(path)
+    out = None
+    if isinstance(source, np.ndarray):
+        if source.dtype == np.float32 and source.flags.c_contiguous and source.flags.writeable and source.ndim == 2:
+            out = source  # a decoded float32 map is ours: converted in place, chunk by chunk
+        source = _array_stream(path, source)
+    return _to_map(source, 1.0 if scale is None else scale, zero_is_invalid, invalid_value, out)
+
+
+def _array_stream(path: Path, a: np.ndarray) -> Stream:
+    """A decoded array as a :class:`Stream` of flat chunks (views, no copy)."""
+    h, w = map_shape(path, a.shape, a.dtype)
+    flat = np.ascontiguousarray(a).reshape(-1)
+    step = max(1, CHUNK_ITEMS // w) * w  # whole rows
+    return Stream((h, w), a.dtype, False, (flat[i:i + step] for i in range(0, flat.size, step)))
+
+
+def _to_map(src: Stream, scale: float, zero_is_invalid: bool, invalid_value: float | None,
+            out: np.ndarray | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Stored values -> (float32 pixels, valid), one chunk at a time (into ``out`` if given: the
+    float32 array the chunks are views of, each chunk read before it is overwritten)."""
+    disparity = np.empty(src.shape, np.float32) if out is None else out
+    valid = np.empty(src.shape, np.bool_)
+    # (lines, line length) views: rows, or columns for an array stored column-major
+    d_lines, v_lines = (disparity.T, valid.T) if src.fortran else (disparity, valid)
+    line, start = d_lines.shape[1], 0
+    for raw in src.chunks:
+        values = raw.astype(np.float64) * scale
+        with np.errstate(over="ignore"):  # values beyond float32 become inf there: invalid, not a huge disparity
+            ok = np.isfinite(values.astype(np.float32)) & (values >= 0)
+        if zero_is_invalid:
+            ok &= raw != 0
+        if invalid_value is not None:
+            ok &= raw != invalid_value
+        end = start + raw.size // line
+        d_lines[start:end] = np.where(ok, values, 0.0).reshape(-1, line)
+        v_lines[start:end] = ok.reshape(-1, line)
+        start = end
     return torch.from_numpy(disparity), torch.from_numpy(valid)
 
 
 def _read_tiff_disparity(path: Path, scale: float | None) -> np.ndarray:
-    img = _imread(path)
+    header = tiff_header(path)
+    if header.samples != 1:
+        raise DataFileError(path, f"a disparity TIFF must have one channel; its header claims {header.samples}")
+    tiff_cost(path, header, bytes_per_px=OUT_BYTES_PER_PX)
+    img = _decode(path)
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[:, :, 0]
     if img.ndim != 2:
         raise DataFileError(path, f"a disparity TIFF must have one channel; got shape {img.shape}")
-    if img.size > MAX_PIXELS:
-        raise DataFileError(path, f"{img.shape[1]}x{img.shape[0]} px is above the limit of {MAX_PIXELS:,} "
-                                  "(SOMTORCH_MAX_PIXELS)")
     if not np.issubdtype(img.dtype, np.floating) and scale is None:
         raise DataFileError(path, f"an integer ({img.dtype}) TIFF has no standard disparity encoding; give "
                                   "data.disparity_scale= on the command line (scale= in read_disparity; "
@@ -136,7 +176,9 @@ def _read_tiff_disparity(path: Path, scale: float | None) -> np.ndarray:
 
 
 def _read_png_disparity(path: Path, scale: float | None) -> np.ndarray:
-    img = _imread(path)
+    if not check_png(path, ratio=MAX_RATIO, bytes_per_px=OUT_BYTES_PER_PX):
+        raise DataFileError(path, "cannot decode it as a PNG: it does not start with the PNG signature")
+    img = _decode(path)
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[:, :, 0]
     if img.ndim != 2:
@@ -154,144 +196,11 @@ def _read_png_disparity(path: Path, scale: float | None) -> np.ndarray:
     return img
 
 
-# what numpy and zipfile raise on corrupt, truncated, encrypted or mis-named .npy / .npz files
-_NUMPY_READ_ERRORS = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
-                      RuntimeError, tokenize.TokenError, SyntaxError, AttributeError, KeyError, MemoryError)
-
-
-MAX_PIXELS = int(os.environ.get("SOMTORCH_MAX_PIXELS", 200_000_000))
-"""Largest map (H·W, or array elements) a reader accepts; checked from the file's header before any
-pixel is read (``SOMTORCH_MAX_PIXELS`` overrides it)."""
-
-
-def _check_npy_header(path: Path, f: Any) -> None:
-    """Read the .npy header of the open file ``f`` and refuse shapes beyond :data:`MAX_PIXELS`."""
-    fmt = np.lib.format
-    try:
-        major, _ = fmt.read_magic(f)
-        shape, _, dtype = (fmt.read_array_header_1_0(f) if major == 1 else fmt.read_array_header_2_0(f))
-    except _NUMPY_READ_ERRORS as e:
-        raise DataFileError(path, f"bad .npy header: {type(e).__name__}: {e}") from None
-    n = int(np.prod(shape, dtype=np.float64)) if shape else 1
-    if n > MAX_PIXELS or n * max(dtype.itemsize, 1) > 8 * MAX_PIXELS:
-        raise DataFileError(path, f"the array header claims shape {shape} ({n:,} elements of {dtype}); the "
-                                  f"limit is {MAX_PIXELS:,} (SOMTORCH_MAX_PIXELS)")
-
-
-def _load_npy(path: Path) -> np.ndarray:
-    with open(path, "rb") as f:
-        if f.read(6) == b"\x93NUMPY":
-            f.seek(0)
-            _check_npy_header(path, f)
-    try:
-        a = np.load(path, allow_pickle=False)
-    except _NUMPY_READ_ERRORS as e:
-        raise DataFileError(path, f"cannot read .npy: {type(e).__name__}: {e}") from None
-    if not isinstance(a, np.ndarray):  # an .npz archive under a .npy name
-        raise DataFileError(path, "is a zip archive (.npz), not a .npy array; rename it to .npz")
-    return a
-
-
-def _load_npz(path: Path) -> np.ndarray:
-    try:
-        data = np.load(path, allow_pickle=False)
-    except _NUMPY_READ_ERRORS as e:
-        raise DataFileError(path, f"cannot read .npz: {type(e).__name__}: {e}") from None
-    if isinstance(data, np.ndarray):  # a plain .npy under a .npz name
-        return data
-    with data:
-        try:  # sizes from the zip directory and the member's header, before inflating anything
-            for info in data.zip.infolist():
-                if info.file_size > 8 * MAX_PIXELS + 4096:
-                    raise DataFileError(path, f"member {info.filename!r} inflates to {info.file_size:,} bytes; the "
-                                              f"limit is {8 * MAX_PIXELS + 4096:,} (SOMTORCH_MAX_PIXELS)")
-        except AttributeError:
-            pass
-        keys = list(data.files)
-        if not keys:
-            raise DataFileError(path, "the .npz archive contains no arrays; expected one named "
-                                      f"{' or '.join(_NPZ_KEYS)}")
-        key = next((k for k in _NPZ_KEYS if k in keys), keys[0] if len(keys) == 1 else None)
-        if key is None:
-            raise DataFileError(path, f"cannot tell which array is the disparity: keys {keys}; "
-                                      f"name it {' or '.join(_NPZ_KEYS)}, or store a single array")
-        try:
-            with data.zip.open(key + ".npy") as member:
-                _check_npy_header(path, member)
-        except KeyError:
-            pass
-        except _NUMPY_READ_ERRORS as e:
-            raise DataFileError(path, f"cannot read array {key!r} from the .npz: {type(e).__name__}: {e}") from None
-        try:
-            arr = data[key]
-        except _NUMPY_READ_ERRORS as e:
-            raise DataFileError(path, f"cannot read array {key!r} from the .npz: {type(e).__name__}: {e}") from None
-        if not isinstance(arr, np.ndarray):
-            raise DataFileError(path, f"member {key!r} of the .npz is not an array")
-        return arr
-
-
-def _as_2d_numeric(path: Path, a: np.ndarray) -> np.ndarray:
-    if a.ndim == 3 and a.shape[2] == 1:
-        a = a[:, :, 0]
-    if a.ndim != 2:
-        raise DataFileError(path, f"a disparity map must be 2-D (H, W); got shape {a.shape}")
-    if a.size == 0:
-        raise DataFileError(path, f"the disparity map is empty (shape {a.shape})")
-    if a.dtype == np.bool_ or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
-        raise DataFileError(path, f"a disparity map must hold real numbers; got dtype {a.dtype}")
-    return a
-
-
 # ----------------------------------------------------------------------------------- images and masks
 
 
-def _check_png_header(path: Path) -> None:
-    """Refuse a PNG whose IHDR claims more than :data:`MAX_PIXELS` before OpenCV decodes it."""
-    with open(path, "rb") as f:
-        head = f.read(26)
-        size = os.fstat(f.fileno()).st_size
-    if not head.startswith(b"\x89PNG\r\n\x1a\n"):
-        return  # not a PNG: OpenCV decides
-    if len(head) < 26 or head[12:16] != b"IHDR":
-        raise DataFileError(path, "truncated or corrupt PNG: no IHDR chunk")
-    w, h = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
-    if w == 0 or h == 0 or w * h > MAX_PIXELS:
-        raise DataFileError(path, f"the PNG header claims {w}x{h} px; the limit is {MAX_PIXELS:,} px "
-                                  "(SOMTORCH_MAX_PIXELS)")
-    channels = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}.get(head[25])
-    if channels is None or head[24] not in (1, 2, 4, 8, 16):
-        raise DataFileError(path, f"corrupt PNG header: bit depth {head[24]}, colour type {head[25]}")
-    raw = h * ((w * channels * head[24] + 7) // 8 + 1)  # bytes of the filtered image data
-    if raw > 1100 * size + 65536:  # deflate compresses at most ~1032:1
-        raise DataFileError(path, f"a {size:,}-byte PNG cannot hold the {w}x{h} image its header claims "
-                                  "(truncated or corrupt)")
-    _check_png_chunks(path)
-
-
-def _check_png_chunks(path: Path) -> None:
-    """Walk the chunks and verify their CRCs: a corrupt PNG is refused here, in microseconds, rather
-    than inside the decoder (which can take seconds on some corruptions)."""
-    data = path.read_bytes()
-    pos, n = 8, len(data)
-    while pos < n:
-        if pos + 12 > n:
-            raise DataFileError(path, f"truncated PNG: chunk header at byte {pos}")
-        length = int.from_bytes(data[pos:pos + 4], "big")
-        kind = data[pos + 4:pos + 8]
-        end = pos + 12 + length
-        if length > 2**31 - 1 or end > n:
-            raise DataFileError(path, f"truncated or corrupt PNG: chunk {kind!r} at byte {pos} claims {length:,} bytes")
-        if zlib.crc32(data[pos + 4:pos + 8 + length]) != int.from_bytes(data[end - 4:end], "big"):
-            raise DataFileError(path, f"corrupt PNG: CRC mismatch in chunk {kind!r} at byte {pos}")
-        if kind == b"IEND":
-            return
-        pos = end
-    raise DataFileError(path, "truncated PNG: no IEND chunk")
-
-
-def _imread(path: Path) -> np.ndarray:
-    _check_png_header(path)
+def _decode(path: Path) -> np.ndarray:
+    """OpenCV's decode of an image whose header was checked; its errors as DataFileError."""
     try:
         img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     except cv2.error as e:
@@ -300,6 +209,13 @@ def _imread(path: Path) -> np.ndarray:
         raise DataFileError(path, "OpenCV cannot decode this file as an image (corrupt, empty or not an "
                                   "image format)")
     return img
+
+
+def _imread(path: Path) -> np.ndarray:
+    """An image or mask: a PNG's header and stream are checked first (deflate's ratio; an int64
+    copy of a mask per pixel held beside it), any other format is OpenCV's to decode."""
+    check_png(path, ratio=DEFLATE_RATIO, bytes_per_px=8)
+    return _decode(path)
 
 
 def read_image(path: str | Path) -> torch.Tensor:

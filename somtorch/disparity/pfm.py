@@ -8,6 +8,7 @@ error is a :class:`~somtorch.validation.DataFileError` naming the file.
 from __future__ import annotations
 
 import logging
+import os
 import re
 from pathlib import Path
 
@@ -15,11 +16,14 @@ import numpy as np
 import torch
 
 from somtorch.atomic import write_bytes
+from somtorch.disparity.headers import OUT_BYTES_PER_PX, check_cost
 from somtorch.validation import DataFileError, require_file
 
 __all__ = ["read_pfm", "write_pfm"]
 log = logging.getLogger("somtorch.disparity.io")
 _WHITESPACE = re.compile(rb"\s+")
+_HEADER_BYTES = 4096  # the three header lines are read from at most this many first bytes
+_CHUNK_BYTES = 4 << 20  # rows are read and flipped this many bytes at a time
 
 
 def read_pfm(path: str | Path, *, channel: int | None = None) -> tuple[np.ndarray, float]:
@@ -51,29 +55,37 @@ def read_pfm(path: str | Path, *, channel: int | None = None) -> tuple[np.ndarra
         - Output array: :math:`(H, W)`.
     """
     path = require_file(path, "PFM file")
-    raw = path.read_bytes()
-    kind, width, height, scale, offset = _parse_pfm_header(path, raw)
-    n_channels = 3 if kind == "PF" else 1
-    if n_channels == 1 and channel not in (None, 0):
-        raise DataFileError(path, f"channel={channel} requested but the file is single-channel (Pf)")
-    if n_channels == 3:
-        if channel is None:
-            raise DataFileError(path, "colour PFM (PF, 3 channels) is not a single-channel disparity map "
-                                      "(Freiburg optical flow is stored this way); pass channel=0, 1 or 2 "
-                                      "to read one channel")
-        if channel not in (0, 1, 2):
-            raise DataFileError(path, f"channel must be 0, 1 or 2 for a colour PFM; got {channel!r}")
-    expected = width * height * n_channels * 4
-    available = len(raw) - offset
-    if available < expected:
-        raise DataFileError(path, f"truncated PFM data: {width}x{height}x{n_channels} float32 needs "
-                                  f"{expected} bytes after the header, found {available}")
-    if available > expected:
-        log.warning("%s: %d extra bytes after the PFM data ignored", path, available - expected)
-    dtype = np.dtype("<f4") if scale < 0 else np.dtype(">f4")
-    data = np.frombuffer(raw, dtype=dtype, count=width * height * n_channels, offset=offset)
-    data = data.reshape(height, width, n_channels)[::-1, :, channel or 0]  # (H, W), rows top-to-bottom
-    return np.ascontiguousarray(data, dtype=np.float32), scale
+    with open(path, "rb") as f:
+        kind, width, height, scale, offset = _parse_pfm_header(path, f.read(_HEADER_BYTES))
+        n_channels = 3 if kind == "PF" else 1
+        if n_channels == 1 and channel not in (None, 0):
+            raise DataFileError(path, f"channel={channel} requested but the file is single-channel (Pf)")
+        if n_channels == 3:
+            if channel is None:
+                raise DataFileError(path, "colour PFM (PF, 3 channels) is not a single-channel disparity map "
+                                          "(Freiburg optical flow is stored this way); pass channel=0, 1 or 2 "
+                                          "to read one channel")
+            if channel not in (0, 1, 2):
+                raise DataFileError(path, f"channel must be 0, 1 or 2 for a colour PFM; got {channel!r}")
+        expected = width * height * n_channels * 4
+        available = os.fstat(f.fileno()).st_size - offset
+        if available < expected:
+            raise DataFileError(path, f"truncated PFM data: {width}x{height}x{n_channels} float32 needs "
+                                      f"{expected} bytes after the header, found {available}")
+        # the map, then read_disparity's float32 map and valid mask beside it
+        check_cost(path, f"the PFM header claims {width}x{height} px", pixels=width * height,
+                   decoded=expected, held=width * height * (4 + OUT_BYTES_PER_PX), ratio=None)
+        if available > expected:
+            log.warning("%s: %d extra bytes after the PFM data ignored", path, available - expected)
+        dtype = np.dtype("<f4") if scale < 0 else np.dtype(">f4")
+        out = np.empty((height, width), np.float32)
+        rows = max(1, _CHUNK_BYTES // (width * n_channels * 4))
+        f.seek(offset)
+        for done in range(0, height, rows):  # stored bottom row first: file rows fill `out` from its end
+            k = min(rows, height - done)
+            block = np.frombuffer(f.read(k * width * n_channels * 4), dtype=dtype).reshape(k, width, n_channels)
+            out[height - done - k:height - done] = block[::-1, :, channel or 0]
+    return out, scale
 
 
 def _parse_pfm_header(path: Path, raw: bytes) -> tuple[str, int, int, float, int]:

@@ -126,13 +126,25 @@ def test_a_signal_stops_every_worker_and_marks_their_folders(tmp_path, sig, code
 
 
 @pytest.mark.slow
-def test_a_bad_job_ends_the_sweep_with_its_status_after_the_good_one(tmp_path):
-    # train.epochs=0 fails the job's config check: one line, status 2; the other job completes
+def test_a_bad_config_refuses_the_whole_sweep_before_any_job_runs(tmp_path):
+    # train.epochs=0 fails the job's config rules: one line naming the job, status 2, nothing run
     code, err = _finished(tmp_path, *SMALL, "train.epochs=3,0", "hydra.launcher.n_jobs=2")
     assert code == 2, err
     assert "Traceback" not in err
+    assert [line for line in err.splitlines() if line.startswith("error: ")] == [err.strip().splitlines()[-1]], err
+    assert "train.epochs=0" in err and "train.epochs must be" in err and "no job of the sweep was run" in err, err
+    assert not (tmp_path / "studies" / "l").exists() or not any(p.is_dir() for p in (tmp_path / "studies" / "l").iterdir())
+
+
+@pytest.mark.slow
+def test_a_job_failing_at_run_time_ends_the_sweep_with_its_status_after_the_good_one(tmp_path):
+    # a scene that does not exist passes the config check and fails in its job: one line, status 2
+    code, err = _finished(tmp_path, *SMALL, "data=file", "data.source=motorcycle,missing_scene.pfm",
+                          "hydra.launcher.n_jobs=2")
+    assert code == 2, err
+    assert "Traceback" not in err
     assert sum(line.startswith("error: ") for line in err.splitlines()) == 1, err
-    good, bad = (_job(tmp_path, f"train.epochs={n}") for n in (3, 0))
+    good, bad = sorted(_jobs(tmp_path), key=lambda j: not j.name.startswith("data.source=motorcycle"))
     assert json.loads((good / "metrics.json").read_text())["runs"]["seed"] == [0, 1]
     assert (bad / "FAILED").exists() and not (bad / "metrics.json").exists()
 

@@ -1,4 +1,4 @@
-"""Seeded mutation fuzzing of every reader (issue 14).
+"""Seeded mutation fuzzing of every reader (issue 14) and of the decompression bombs of issue 34.
 
 Each case mutates a small valid file (flipped and inserted bytes, truncation, spliced chunks, text
 headers with huge or non-numeric values, random bytes) and calls the reader. It must return a valid
@@ -20,13 +20,14 @@ import pytest
 import torch
 from safetensors.torch import save_file
 
-import somtorch.disparity.io as sio
+import somtorch.disparity.headers as headers
 from somtorch import SOM
 from somtorch.disparity.camera import _oakd_camera, read_middlebury_camera
 from somtorch.disparity.io import read_disparity, read_image, read_json, read_mask, write_pfm
 from somtorch.disparity.labels import read_polygon_labels
 from somtorch.disparity.loading import load_scene
 from somtorch.disparity.stereo import SGBMParams, load_stereo_pair
+from tests.fuzz import bombs
 
 CASES = int(os.environ.get("FUZZ_CASES", 2000))
 
@@ -72,6 +73,11 @@ def _seeds(tmp: Path) -> dict[str, Path]:
     (tmp / "labels.json").write_text(json.dumps({"size_hw": [12, 16], "objects": [
         {"id": 1, "name": "a", "main": True, "polygons": [[[1, 1], [10, 1], [10, 8], [1, 8]]]}]}))
     files["labels"] = tmp / "labels.json"
+    # the reproducers of issue 34, small: each claims 4-8 MB from a few kB
+    files["npz_bomb"] = bombs.npz_zeros(tmp / "zeros.npz", 1000, 1000)
+    files["png_bomb"] = bombs.png16(tmp / "bomb.png", 2000, 2000)
+    files["tiff_bomb"] = bombs.tiff_striped(tmp / "bomb.tif", 1000, 1000)
+    files["png_overrun"] = bombs.png16(tmp / "overrun.png", 100, 100, inflated=20_000_000)
     som = SOM(2, 3, 3, ensemble=2, seed=0)
     som.weight = torch.rand(2, 6, 3, generator=torch.Generator().manual_seed(0))
     files["checkpoint"] = som.save(tmp / "m.safetensors")
@@ -118,6 +124,10 @@ READERS = {
     "npy": lambda p: read_disparity(p),
     "tiff": lambda p: read_disparity(p),
     "npz": lambda p: read_disparity(p),
+    "npz_bomb": lambda p: read_disparity(p),
+    "png_bomb": lambda p: read_disparity(p),
+    "tiff_bomb": lambda p: read_disparity(p),
+    "png_overrun": lambda p: read_disparity(p),
     "calib": lambda p: read_middlebury_camera(p),
     "oakd": lambda p: _oakd_camera(p.parent, (12, 16)),
     "json": lambda p: read_json(p),
@@ -130,7 +140,7 @@ READERS = {
 
 def _check_result(kind: str, out) -> None:
     """A returned result must be sound."""
-    if kind in ("pfm", "png16", "npy", "npz", "tiff"):
+    if kind in ("pfm", "png16", "npy", "npz", "tiff") or kind.endswith(("_bomb", "_overrun")):
         disp, valid = out
         assert disp.shape == valid.shape and disp.dtype == torch.float32 and valid.dtype == torch.bool
         assert bool(torch.isfinite(disp).all()) and bool((disp[valid] >= 0).all())
@@ -144,7 +154,7 @@ def _check_result(kind: str, out) -> None:
 
 
 def _fuzz(kind: str, cases: int, tmp_path: Path, monkeypatch) -> dict[str, int]:
-    monkeypatch.setattr(sio, "MAX_PIXELS", 10_000_000)  # small limit: a case may never allocate much
+    monkeypatch.setattr(headers, "MAX_PIXELS", 10_000_000)  # small limit: a case may never allocate much
     seed_file = _seeds(tmp_path)[kind]
     original = seed_file.read_bytes()
     rng = random.Random(f"{kind}-{cases}")
