@@ -104,7 +104,6 @@ def main(dcfg: DictConfig) -> dict:
     configure_threads()
     from .cli import interruptible, marked_if_failed
     from .schema import one_line_errors, to_config
-    from somtorch import interrupt
     from somtorch.atomic import commit_staged, write_json
     from somtorch.outputs import SequenceWriter
     from somtorch.video import SequenceRunner

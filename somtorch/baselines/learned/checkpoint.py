@@ -16,8 +16,6 @@ import os
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from somtorch.atomic import atomic_path, write_json
 from somtorch.baselines.learned.model import UNet
 from somtorch.config.learned import LearnedModelConfig

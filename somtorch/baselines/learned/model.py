@@ -54,6 +54,12 @@ class UNet(nn.Module):
         init_weights(self, torch.Generator().manual_seed(0) if generator is None else generator)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The main object's mask logits of a batch of prepared frames.
+
+        Shape:
+            ``x`` ``(B, in_channels, H, W)`` with H and W divisible by ``2 ** (len(widths) - 1)``
+            → ``(B, 1, H, W)`` logits.
+        """
         skips = []
         for i, block in enumerate(self.down):
             x = block(x if i == 0 else F.max_pool2d(x, 2))  # (B, w_i, H / 2^i, W / 2^i)

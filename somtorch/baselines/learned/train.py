@@ -196,6 +196,7 @@ class TrainEstimate:
 
     @property
     def seconds(self) -> float:
+        """The whole estimate in seconds: rendering, preparation, training and evaluation."""
         return self.render_s + self.prepare_s + self.train_s + self.eval_s
 
 
