@@ -106,9 +106,7 @@ class AreaConfig(Validated):
         select: ``"nearest"`` (largest mean disparity, the paper's), ``"salient"`` (ranked by
             contrast to the surrounding segments × ``area_frac ** size_power``) or ``"all"``.
         size_power: weight of the area's size in the salient ranking (0 = contrast alone).
-        max_area_frac, min_area_frac: size limits as shares of the map's valid pixels (the ground
-            plane's included: an object may be all that the ground cut leaves, a staircase on a
-            floor).
+        max_area_frac, min_area_frac: size limits as shares of the segmented pixels.
         max_areas: how many areas are kept at most.
         keep_ratio: with ``max_areas > 1``, a further area is kept only if its rank score is at
             least this share of the best one's (1 = only ties; 0 = up to ``max_areas``).

@@ -87,8 +87,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
     """
     cfg = cfg or AreaConfig()
     stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread)
-    n_valid = int(ctx.valid.sum())
-    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, n_valid=n_valid)
+    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:
         return ObjectResult(stats, areas, kept)
@@ -123,7 +122,6 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         ``labels`` ``(H, W)``.
     """
     checks = cfg.min_purity > 0 or cfg.min_solidity > 0
-    n_valid = int(ctx.valid.sum())
     areas_max = cfg.max_areas if cfg.keep_ratio < 1 else 1  # a ratio of 1 keeps only the best
     tries = areas_max + (cfg.purity_candidates - 1 if checks else 0)
     ranked = select_areas(areas, stats, replace(cfg, max_areas=tries))
@@ -139,8 +137,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         if kept and confidence < cfg.keep_ratio:
             break
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
-                                max_area_frac=cfg.max_area_frac, exclude=taken,
-                                total=n_valid)[0]
+                                max_area_frac=cfg.max_area_frac, exclude=taken)[0]
         done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                           stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
                           clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)

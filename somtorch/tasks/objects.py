@@ -190,7 +190,7 @@ def _components(adj: torch.Tensor) -> list[list[int]]:
 
 
 def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None, stats: NeuronStats,
-                      cfg: AreaConfig | None = None, *, n_valid: int | None = None) -> list[ObjectArea]:
+                      cfg: AreaConfig | None = None) -> list[ObjectArea]:
     """All object areas of one SOM (connected components of similar, grid-adjacent neurons).
 
     Args:
@@ -200,8 +200,6 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
             image only, whatever ``cfg.link`` says.
         stats: :func:`neuron_stats` of the member's label map.
         cfg: recognition parameters.
-        n_valid: the map's valid pixels (segmented or not, the ground plane's included), the
-            reference of ``area_frac`` and of the size limits; None: the segmented pixels.
 
     Returns:
         areas with at least one pixel, in no particular order (see :func:`select_areas`).
@@ -218,7 +216,7 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
         near = touch if link == "image" else near | touch
     adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
     adj.fill_diagonal_(False)
-    return areas_of(_components(adj), stats, total=n_valid)
+    return areas_of(_components(adj), stats)
 
 
 def _touching(stats: NeuronStats, min_boundary: float) -> torch.Tensor:
@@ -227,10 +225,9 @@ def _touching(stats: NeuronStats, min_boundary: float) -> torch.Tensor:
     return stats.boundary >= min_boundary * torch.minimum(per[:, None], per[None, :])
 
 
-def areas_of(comps: list[list[int]], stats: NeuronStats, *, total: float | None = None) -> list[ObjectArea]:
+def areas_of(comps: list[list[int]], stats: NeuronStats) -> list[ObjectArea]:
     """The object areas of the neuron groups ``comps`` (lists of neuron indices), with their pixel
-    count, box, mean disparity and contrast; empty groups are left out. ``area_frac`` is a share of
-    ``total`` pixels (default: the segmented ones)."""
+    count, box, mean disparity, contrast and share of the segmented pixels; empty groups are left out."""
     # per-component sums as (C, K) one-hot products: one pass instead of a loop of small tensor ops
     onehot = torch.zeros(len(comps), int(stats.count.shape[0]), dtype=torch.float64)
     for i, comp in enumerate(comps):
@@ -248,7 +245,7 @@ def areas_of(comps: list[list[int]], stats: NeuronStats, *, total: float | None 
     y0 = torch.where(member, stats.box[None, :, 1], big).amin(1)
     x1 = torch.where(member, stats.box[None, :, 2], -1).amax(1)
     y1 = torch.where(member, stats.box[None, :, 3], -1).amax(1)
-    total = float(total) if total else float(stats.count.sum())
+    total = float(stats.count.sum())
     areas = []
     for i, comp in enumerate(comps):
         n = float(n_px[i])

@@ -26,8 +26,7 @@ _D = AreaConfig  # the defaults of the helpers below are those of the config
 
 
 def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float = _D.merge,
-                   min_boundary: float = _D.min_boundary, max_area_frac: float = 1.0, exclude: torch.Tensor | None = None,
-                   total: float | None = None) -> list[ObjectArea]:
+                   min_boundary: float = _D.min_boundary, max_area_frac: float = 1.0, exclude: torch.Tensor | None = None) -> list[ObjectArea]:
     """Join to each kept area the segments that are other parts of the same object (``AreaConfig.merge``).
 
     A segment (one neuron's pixels) joins if it touches the growing group in the image (their common
@@ -39,8 +38,7 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
     ``max_area_frac`` of the valid pixels. A segment joins at most one group; a kept area that a
     better-ranked one absorbed is dropped.
 
-    ``exclude`` ``(K,)`` bool marks segments that may not join (those of areas kept already);
-    ``total``: the pixels ``area_frac`` and ``max_area_frac`` are shares of (default: the segmented ones).
+    ``exclude`` ``(K,)`` bool marks segments that may not join (those of areas kept already).
 
     Returns:
         the kept areas in rank order; a grown area lists all its neurons, the union of the segment
@@ -52,7 +50,7 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
     k = int(stats.count.shape[0])
     per = stats.perimeter
     mean_d = torch.nan_to_num(stats.mean_d, nan=float("inf"))  # empty segments never join
-    total = float(total) if total else float(stats.count.sum())
+    total = float(stats.count.sum())
     taken = torch.zeros(k, dtype=torch.bool) if exclude is None else exclude.clone()
     out = []
     for a in kept:

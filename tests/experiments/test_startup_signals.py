@@ -66,4 +66,4 @@ def test_a_signal_once_hydra_made_the_folder_gives_one_line(tmp_path, sig):
     # the library's handler by then (start-up or the job itself): still one line, no traceback
     code, lines = _signalled(["-m", "experiments.run", "train.epochs=100000"], sig, "folder", tmp_path)
     assert code == 128 + sig, lines
-    assert len(lines) == 1 and lines[0].startswith(f"interrupted ({signal.Signals(sig).name}) "), lines
+    assert len(lines) == 1 and lines[0].startswith(f"interrupted ({signal.Signals(sig).name})"), lines
