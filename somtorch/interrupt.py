@@ -143,6 +143,15 @@ def worker_pool(workers: int, initializer: Callable[..., Any] | None = None,
 
     pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"),
                                initializer=partial(_worker_start, initializer, tuple(initargs)))
+    # start the workers now with SIGINT blocked: they inherit the mask, so a Ctrl-C to the process
+    # group while they still import torch cannot print their tracebacks; a SIGINT that reaches this
+    # process meanwhile stays pending and is delivered when the mask is restored
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        for _ in range(workers):  # one worker spawned per submit (in this thread) until the pool is full
+            pool.submit(int)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
     try:
         yield pool
     except BaseException:

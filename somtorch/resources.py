@@ -45,8 +45,9 @@ from .validation import SomtorchError
 __all__ = ["Estimate", "ResourceError", "available_memory", "check", "combine", "estimate", "fmt_bytes", "fmt_seconds"]
 
 GIB = 1 << 30
-_FIXED = 128 << 20  # allocator slack, chunk buffers of the BMU search (16 MiB of scores, a few of them); 96 MiB
-# was exceeded by 1 % (739 vs 731 MB, ensemble 40, every pixel) when the pipeline ran on one free core (2026-12-03)
+_FIXED = 192 << 20  # allocator slack, chunk buffers of the BMU search (16 MiB of scores, a few of them); the
+# same run's peak varies by ~70 MB with the thread count the pipeline picks on a busy machine (739 and 808 MB
+# measured against 731 MB estimated with 96 MiB here, ensemble 40, every pixel, 2026-12-03)
 _CHUNK = 1 << 22  # somtorch.core.distance.DEFAULT_CHUNK_ELEMENTS
 _BLOCK = 4096  # somtorch.core.training.BLOCK_STEPS
 # seconds per unit of work: one thread of the 2-core development CPU with the native kernel, fitted
