@@ -71,7 +71,7 @@ def _stream(path: Path, f: IO[bytes], what: str, ratio: int | None, close: list[
     return Stream(hw, dtype, fortran, chunks())
 
 
-def read_npy(path: Path) -> Stream | np.ndarray:
+def read_npy(path: Path) -> Stream:
     """A ``.npy`` file as a :class:`Stream` (a zip archive under this name: DataFileError)."""
     f = open(path, "rb")  # noqa: SIM115 - closed when the chunks are read, or below
     try:
@@ -98,9 +98,7 @@ def read_npz(path: Path) -> Stream:
     with open(path, "rb") as f:
         magic = f.read(6)
     if magic == b"\x93NUMPY":
-        stream = read_npy(path)
-        assert isinstance(stream, Stream)
-        return stream
+        return read_npy(path)
     try:
         archive = zipfile.ZipFile(path)
     except READ_ERRORS as e:
