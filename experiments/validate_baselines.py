@@ -35,7 +35,7 @@ def check_trained(names: list[str], specs: list[Any]) -> None:
 
 
 def score_baselines(caches: list[Any], names: list[str], reduction: Any) -> dict[str, dict[str, Any]]:
-    """``{frame: {baseline: counts}}`` for every frame cache (``experiments.validate.SceneCache``);
+    """``{frame: {baseline: counts}}`` for every frame cache (``experiments.validate_cache.SceneCache``);
     a baseline that does not apply to a frame (no metric camera) gets None."""
     from somtorch.evaluation import all_objects
     from somtorch.saliency_metrics import saliency_scores

@@ -111,7 +111,7 @@ def to_markdown(report: dict[str, Any]) -> str:
 
 
 def gallery(cache: Any, path: Path, overrides: dict[str, Any] | None = None, member: int = 0) -> Path:
-    """A picture of one member of a frame cache (:class:`experiments.validate.SceneCache`): disparity (turbo, px), ground mask (blue), object masks (green
+    """A picture of one member of a frame cache (:class:`experiments.validate_cache.SceneCache`): disparity (turbo, px), ground mask (blue), object masks (green
     outline), kept boxes with the tolerance (red, with confidence), and its verdict."""
     import matplotlib
 

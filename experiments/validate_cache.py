@@ -1,0 +1,187 @@
+"""Frame caches and the protocol's choices of ``python -m experiments.validate``.
+
+:class:`SceneCache` holds one frame's segmentations (one per upstream setting of the grid) and
+the scores of every candidate on it; :class:`Protocol` turns the scores into per-frame rates and
+makes the choices (adoption of each knob, then the greedy join) on a set of frames.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+# the config groups whose change needs a new segmentation (the rest re-runs only the object step)
+UPSTREAM = ("features", "ground", "som", "train", "baseline", "method", "ensemble", "seed")
+
+
+def _key(overrides: dict[str, Any]) -> str:
+    return ",".join(f"{k}={overrides[k]}" for k in sorted(overrides)) or "default"
+
+
+class SceneCache:
+    """One development scene: its segmentations per upstream setting, scores per candidate."""
+
+    def __init__(self, spec: Any, scene: Any, base: Any, loader: Any = None) -> None:
+        self.spec, self._scene, self.base, self._loader = spec, scene, base, loader
+        self._seg: dict[str, Any] = {}
+        self._target: Any = None  # the scene's all-objects target, computed once
+        self.scores: dict[str, dict[str, Any]] = {}
+
+    @property
+    def scene(self) -> Any:
+        """The frame's scene (loaded on first use when the cache was built from scores alone)."""
+        if self._scene is None:
+            self._scene = self._loader()
+        return self._scene
+
+    def fresh_scene(self) -> Any:
+        """The frame's scene, loaded again (and not kept) where this cache does not hold it."""
+        return self._scene if self._scene is not None else self._loader()
+
+    def members(self, overrides: dict[str, Any]) -> tuple[Any, list]:
+        """``(ground plane, member results)`` of the base config with ``overrides``; the segmentation
+        is computed once per upstream setting (features, ground, SOM, training)."""
+        from dataclasses import replace
+
+        import torch
+
+        from somtorch.config import with_overrides
+        from somtorch.pipeline import detect, on_support, prepare
+        from somtorch.segmenters import run_segmenter
+
+        cfg = with_overrides(self.base, overrides)
+        up = _key({k: v for k, v in overrides.items() if k.split(".")[0] in UPSTREAM})
+        if up not in self._seg:
+            valid, ground, usable, feats, train = prepare(self.scene, cfg)
+            seg = run_segmenter(feats, train, on_support(self.scene, ground, cfg.features)[0], usable, cfg)
+            # kept as int16 (a SOM has far fewer neurons): 30 members x 22 scenes x every upstream
+            # setting of the grid as int64 label maps outgrew 24 GiB
+            small = seg.labels.to(torch.int16) if int(seg.labels.max()) < 2 ** 15 else seg.labels
+            self._seg[up] = (ground, replace(seg, labels=small, som=None))  # (the object step reads no map)
+        ground, seg = self._seg[up]
+        return ground, detect(self.scene, replace(seg, labels=seg.labels.long()), ground, cfg)
+
+    def score(self, overrides: dict[str, Any], saliency: bool = False) -> dict[str, Any]:
+        """Counts over the members with ``overrides`` (cached per key); ``saliency`` adds the mean
+        F-measure / MAE / S-measure of the kept masks against the union of the objects."""
+        from somtorch.evaluation import all_objects, ground_object_share
+
+        key = _key(overrides)
+        if key in self.scores and (not saliency or "saliency" in self.scores[key]):
+            return self.scores[key]
+        ground, members = self.members(overrides)
+        if self._target is None:
+            self._target = all_objects(self.scene)
+        target = self._target
+        s = [m.score for m in members]
+        self.scores[key] = {
+            "runs": len(s), "useful_hits": sum(x.useful_hit for x in s),
+            "identified_95": sum(x.identified_95 for x in s),
+            "all_objects_hits": sum(target.hit(m.reduction) for m in members),
+            "no_object": sum(m.no_object for m in members),
+            # how the other runs missed: the wrong object (< 50 % of the main object kept), partial
+            # (50-95 %), too much kept (>= 95 % but a reduction under 0.75 x x_opt)
+            "misses": {"wrong": sum(x.identified_fraction < 0.5 for x in s),
+                       "partial": sum(0.5 <= x.identified_fraction < 0.95 for x in s),
+                       "too_much": sum(x.identified_95 and not x.useful_hit for x in s)},
+            "mean_reduction": sum(x.reduction_union for x in s) / len(s), "x_opt": s[0].x_opt,
+            "ground_object_frac": ground_object_share(ground, self.scene),
+            "n_objects": len(target.masks), "valid_share": float(self.scene.valid.float().mean()),
+        }
+        if saliency:
+            from somtorch.saliency_metrics import saliency_scores
+
+            union = self.scene.objects > 0
+            per = [saliency_scores(m.reduction.mask, union) for m in members]
+            self.scores[key]["saliency"] = {k: sum(p[k] for p in per) / len(per) for k in per[0]}
+        return self.scores[key]
+
+
+def _score_frame(job: tuple) -> dict[str, dict[str, Any]]:
+    """A worker's job: every candidate of ``keys`` (``[(overrides, saliency)]``) on one frame."""
+    spec, base, keys, data_dir, threads = job
+    import torch
+
+    torch.set_num_threads(threads)
+    from .datasets import load_frame
+
+    cache = SceneCache(spec, load_frame(spec, data_dir), base)
+    for ov, sal in keys:
+        cache.score(ov, saliency=sal)
+    return cache.scores
+
+
+class Protocol:
+    """Per-frame rates of every scored candidate over one set of frame caches, and the choices."""
+
+    def __init__(self, caches: list[SceneCache], cfg: Any, grid: dict[str, list[Any]],
+                 defaults: dict[str, Any]) -> None:
+        from .protocol import FrameTable
+
+        self.caches, self.cfg, self.grid, self.defaults = caches, cfg, grid, defaults
+        self.table = FrameTable([c.spec.dataset for c in caches], [c.spec.group for c in caches],
+                                [c.spec.real for c in caches], n_boot=cfg.n_boot, seed=cfg.seed)
+        self._rates: dict[tuple[str, str], np.ndarray] = {}
+
+    def rates(self, overrides: dict[str, Any], which: str = "useful_hits") -> np.ndarray:
+        """One rate (hits / runs) per frame with ``overrides`` (scored on demand; the array is kept,
+        as the folds ask for the same candidates again and again)."""
+        key = (_key(overrides), which)
+        if key not in self._rates:
+            rows = [c.score(overrides) for c in self.caches]
+            self._rates[key] = np.array([r[which] / r["runs"] for r in rows])
+        return self._rates[key]
+
+    def decide(self, cand: dict[str, Any], base: dict[str, Any], table: Any = None) -> Any:
+        """:func:`experiments.protocol.decide` of ``cand`` against ``base`` on ``table`` (default: all)."""
+        from .protocol import decide
+
+        t = table or self.table
+        sel = getattr(t, "index", slice(None))
+        cu, bu = self.rates(cand)[sel], self.rates(base)[sel]
+        ca, ba = self.rates(cand, "all_objects_hits")[sel], self.rates(base, "all_objects_hits")[sel]
+        return decide(t, cu, bu, ca, ba, loss_margin=self.cfg.loss_margin, ni_margin=self.cfg.ni_margin)
+
+    def choose(self, table: Any = None) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+        """The knobs adopted on ``table``'s frames: per knob the adopted value of the largest real macro
+        gain; then, greedily by gain, each joins the choice only if it is still adopted against the
+        choice so far. Returns ``(overrides, log of the steps)``."""
+        best = []
+        for k, values in self.grid.items():
+            cands = []
+            for v in values:
+                ov = _overrides(k, v, self.defaults)
+                if ov:
+                    d = self.decide(ov, {}, table)
+                    if d.adopt:
+                        cands.append((d.useful[0], k, v, ov))
+            if cands:
+                best.append(max(cands, key=lambda t: t[0]))
+        chosen: dict[str, Any] = {}
+        steps = []
+        for gain, k, v, ov in sorted(best, key=lambda t: -t[0]):
+            trial = {**chosen, **ov}
+            d = self.decide(trial, chosen, table) if chosen else self.decide(ov, {}, table)
+            steps.append({"knob": k, "value": v, "alone_gain": gain, "joined": d.adopt, **d.as_dict()})
+            if d.adopt:
+                chosen = trial
+        return chosen, steps
+
+
+def _overrides(key: str, value: Any, defaults: dict[str, Any]) -> dict[str, Any]:
+    """The overrides of one grid value; a key ``"a.b+c.d"`` sets several fields at once (``value`` a list)."""
+    if value == defaults[key]:
+        return {}
+    names = key.split("+")
+    values = list(value) if len(names) > 1 else [value]
+    if len(values) != len(names):
+        raise ValueError(f"grid {key!r}: value {value!r} must give {len(names)} values")
+    return dict(zip(names, values))
+
+
+def _default_of(cfg: Any, key: str) -> Any:
+    obj = cfg
+    for part in key.split("."):
+        obj = getattr(obj, part)
+    return obj
