@@ -64,8 +64,7 @@ def test_the_paper_preset_pins_every_value_that_differs_from_the_default():
     o = paper.objects
     assert (o.similarity, o.link, o.spread, o.select, o.merge, o.min_purity, o.min_solidity, o.fail_safe) == \
         (0.1, "grid", "range", "nearest", 0.0, 0.0, 0.0, False)
-    assert (o.box_coverage, o.box_quantile, o.ground_clutter, o.max_area_frac, o.min_area_frac, o.max_areas, o.drop_specks) == \
-        (1.0, 0.0, 0.0, 1.0, 0.0, 1, False)
+    assert (o.box_coverage, o.box_quantile, o.ground_clutter, o.max_areas, o.drop_specks) == (1.0, 0.0, 0.0, 1, False)
     r = paper.reduction
     assert (r.tolerance_px, r.tolerance_frac, r.tolerance_image) == (0, 0.05, 0.0)
 
@@ -74,8 +73,9 @@ def test_the_paper_preset_pins_every_value_that_differs_from_the_default():
     (AreaConfig, {"min_purity": 2.0}, ["objects.min_purity", "[0, 1]", "2.0"]),
     (AreaConfig, {"select": "largest"}, ["objects.select", "largest", "all, nearest, salient"]),
     (AreaConfig, {"connectivity": 6}, ["objects.connectivity", "[4, 8]"]),
-    (AreaConfig, {"min_area_frac": 0.8}, ["min_area_frac < max_area_frac"]),
-    (GroundConfig, {"max_below_frac": -0.1}, ["ground.max_below_frac"]),
+    (AreaConfig, {"keep_budget": 0.0}, ["objects.keep_budget", "(0, 1]"]),
+    (TrainConfig, {"parallel": "data", "mode": "online"}, ["parallel='data'", "mode='online'"]),
+    (GroundConfig, {"min_inlier_frac": -0.1}, ["ground.min_inlier_frac"]),
     (TrainConfig, {"epochs": 0}, ["train.epochs", "integer"]),
     (FeatureConfig, {"d_weight": float("inf")}, ["features.d_weight", "finite"]),
     (ReductionConfig, {"tolerance_image": -1}, ["reduction.tolerance_image"]),

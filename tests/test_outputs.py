@@ -15,7 +15,7 @@ from somtorch.pipeline import PipelineConfig, TrainConfig, run_pipeline
 from somtorch.tasks.objects import AreaConfig
 
 MAPS = ("disparity", "segments_grey", "segments_color", "reference_vectors", "areas", "reduced_disparity")
-PAPER = AreaConfig(select="nearest", max_area_frac=1.0, min_area_frac=0.0)
+PAPER = AreaConfig(select="nearest")
 
 
 def _cfg(ensemble: int) -> PipelineConfig:

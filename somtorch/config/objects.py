@@ -20,8 +20,10 @@ class GroundConfig(Validated):
     tilt in x ≤ tilt in y; RANSAC on the lower image half); ``"support"`` — by what
     the plane supports, at any camera pitch (``support_frac`` of the pixels on it, the pixels above
     it in compact protrusions of at most ``max_protrusion_frac``; RANSAC on the whole map);
-    ``"either"`` — a plane passing either (RANSAC on the lower half). Every rule also needs ``min_inlier_frac`` and
-    ``max_below_frac`` (nothing substantial behind the plane).
+    ``"either"`` — a plane passing either (RANSAC on the lower half). Every rule needs
+    ``min_inlier_frac``; the position rule also ``max_below_frac`` (nothing substantial behind the
+    plane), which a support-verified plane need not pass: a table top holding most of the view
+    has the floor beyond its edges behind it.
 
     Attributes:
         enabled: look for a ground plane at all.
@@ -41,19 +43,14 @@ class GroundConfig(Validated):
             plane (nearer than its band where it is in view) holds at most this share of the valid
             pixels — objects standing on a surface are compact; a scene standing in front of a
             wall-like plane is not.
-        max_below_frac: a support surface hides what lies beneath it, so at most this share of the
-            valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
+        max_below_frac: position rule: a floor hides what lies beneath it, so at most this share of
+            the valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
             (disparity below the band); a ramp, a lattice or a plane through the objects fails
-            (1 = no check).
-        foot_frac: pixels within this share of the shorter image side of a protrusion (a pixel
-            above the plane's band, in a solid 3 × 3 block) leave the mask: the
-            feet of the objects standing on the plane cross its band (every rule; applied after the
-            tests, so it changes the mask, not the verdict; 0 = off).
+            (1 = no check). A plane the support rule verifies is exempt (docs/tuned_constants.md).
         iterations: RANSAC hypotheses.
-        sample: pixels drawn for RANSAC (and, with ``constrained``, for the tests).
+        sample: pixels drawn for RANSAC and for the tests (estimated on a sample for every
+            hypothesis: the best plane that passes them is found, not the best plane refused).
         seed: RANSAC seed (the result does not depend on the SOM seed).
-        constrained: the inlier, behind and top tests are RANSAC constraints (estimated on a
-            sample for every hypothesis); off: only the best hypothesis is tested.
         tries: passing hypotheses tested on the full map at most, best first.
     """
 
@@ -61,8 +58,8 @@ class GroundConfig(Validated):
     _constraints: ClassVar[dict[str, Any]] = {
         "enabled": BOOL, "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_below_frac": FRACTION,
-        "foot_frac": Interval(0, 0.25), "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
-        "constrained": BOOL, "tries": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
+        "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
+        "tries": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
         "max_protrusion_frac": FRACTION,
     }
 
@@ -73,11 +70,9 @@ class GroundConfig(Validated):
     min_inlier_frac: float = 0.08
     min_slope_frac: float = 1.0
     max_below_frac: float = 0.1
-    foot_frac: float = 0.0
     iterations: int = 400
     sample: int = 5000
     seed: int = 0
-    constrained: bool = True
     tries: int = 5
     support_frac: float = 0.6
     max_protrusion_frac: float = 0.2
@@ -106,7 +101,6 @@ class AreaConfig(Validated):
         select: ``"nearest"`` (largest mean disparity, the paper's), ``"salient"`` (ranked by
             contrast to the surrounding segments × ``area_frac ** size_power``) or ``"all"``.
         size_power: weight of the area's size in the salient ranking (0 = contrast alone).
-        max_area_frac, min_area_frac: size limits as shares of the segmented pixels.
         max_areas: how many areas are kept at most.
         keep_ratio: with ``max_areas > 1``, a further area is kept only if its rank score is at
             least this share of the best one's (1 = only ties; 0 = up to ``max_areas``).
@@ -151,13 +145,8 @@ class AreaConfig(Validated):
         "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
         "select": Choice(options.SELECTIONS), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
         "keep_budget": Interval(0, 1, open_lo=True),
-        "fail_safe": BOOL, "max_area_frac": Interval(0, 1, open_lo=True),
-        "min_area_frac": FRACTION,
+        "fail_safe": BOOL,
     }
-    _relations: ClassVar[list[tuple[Any, str]]] = [
-        (lambda c: c.min_area_frac < c.max_area_frac,
-         "need min_area_frac < max_area_frac; got {c.min_area_frac} and {c.max_area_frac}"),
-    ]
 
     similarity: float = 0.05
     connectivity: int = 4
@@ -181,5 +170,3 @@ class AreaConfig(Validated):
     keep_ratio: float = 0.2
     keep_budget: float = 0.3
     fail_safe: bool = True
-    max_area_frac: float = 0.7
-    min_area_frac: float = 0.01

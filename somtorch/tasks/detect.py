@@ -22,7 +22,7 @@ import torch
 from ..config import AreaConfig
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
-                      rank_score, select_areas)
+                      rank_score, select_areas, surround_pairs)
 from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, _square, box_purity, map_solidity, merge_adjacent, refine_box
 
@@ -42,6 +42,8 @@ class MapContext:
         solidity: :func:`~somtorch.tasks.refine.map_solidity` of the segmented pixels.
         ground_residual: |disparity − ground plane| ``(H, W)`` or None (no plane, or clutter off).
         clutter_band: ``ground_clutter ×`` the plane's inlier band, px (0 without a plane).
+        surround: :func:`~somtorch.tasks.objects.surround_pairs` of the map, or None (contrast
+            against the segments alone).
     """
 
     disparity: torch.Tensor
@@ -52,6 +54,7 @@ class MapContext:
     solidity: float
     ground_residual: torch.Tensor | None
     clutter_band: float
+    surround: tuple[torch.Tensor, torch.Tensor] | None = None
 
     @classmethod
     def build(cls, disparity: torch.Tensor, valid: torch.Tensor, segmented: torch.Tensor,
@@ -64,7 +67,7 @@ class MapContext:
             band = cfg.ground_clutter * ground.tol
         lab = torch.where(segmented, 0, -1)
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
-                   map_solidity(lab, cfg), residual, band)
+                   map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity))
 
 
 @dataclass
@@ -86,7 +89,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
         ``grid_d2`` ``(K, K)`` or None.
     """
     cfg = cfg or AreaConfig()
-    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread)
+    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread, surround=ctx.surround)
     areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:
@@ -136,8 +139,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         confidence = rank_score(cand, cfg) / best if best > 0 else 1.0
         if kept and confidence < cfg.keep_ratio:
             break
-        joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
-                                max_area_frac=cfg.max_area_frac, exclude=taken)[0]
+        joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary, exclude=taken)[0]
         done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                           stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
                           clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)

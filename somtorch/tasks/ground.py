@@ -7,20 +7,21 @@ the largest disparities of the map, so the paper's "nearest area" rule picks it 
 object standing on it. :func:`fit_ground_plane` finds it with RANSAC on a subsample of the lower
 image half and refines it by least squares on the inliers; a plane that does not look like ground
 (too flat in y, tilted more in x than in y, too few inliers, the scene behind it, or filling the
-top of the image) is rejected and None returned. With ``constrained`` (the default) those tests are
-constraints of the RANSAC model: estimated on a sample of the whole map for every strong
-hypothesis, so the best plane that satisfies them is found instead of the best plane being
-refused (which made the verdict on a real floor near a threshold depend on the seed).
+top of the image) is rejected and None returned. Those tests are constraints of the RANSAC model:
+estimated on a sample of the whole map for every hypothesis, so the best plane that satisfies
+them is found instead of the best plane being refused (which made the verdict on a real floor
+near a threshold depend on the seed).
 
 That is the ``"position"`` rule (``GroundConfig.rule``): it recognises a floor by where a forward
 camera sees it. The ``"support"`` rule recognises it by what it supports, at any camera pitch — a
 floor filling the frame of a camera looking down, a table top, a slope: RANSAC on the whole map, no
-test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels,
-have nothing substantial behind it (``max_below_frac``, as for every rule) and every image-connected
-piece of the pixels above it (nearer than its band, where it is in view) must be a compact
-protrusion of at most ``max_protrusion_frac`` of the pixels. ``"either"`` accepts a plane that
-passes one of the two (RANSAC on the lower half, as the position rule). ``foot_frac`` then takes
-the feet of the protrusions out of the mask (:func:`protrusion_feet`).
+test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels
+and every image-connected piece of the pixels above it (nearer than its band, where it is in view)
+must be a compact protrusion of at most ``max_protrusion_frac`` of the pixels. The position rule
+also wants nothing substantial behind the plane (``max_below_frac``: a floor hides what lies
+beneath it); a support-verified plane need not pass that test (a table top holding most of the
+view has the floor beyond its edges behind it). ``"either"`` accepts a plane that
+passes one of the two (RANSAC on the lower half, as the position rule).
 """
 
 from __future__ import annotations
@@ -117,17 +118,16 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     # inlier counts of every hypothesis in float32 (disparities of a few hundred px, a band of at
     # least tol_px: far above its rounding); element-wise, so the same bits at any thread count
     score = ((_predict(coef, pts) - pts[None, :, 2].float()).abs_() < tol).sum(1).masked_fill(~plausible, -1)
-    if cfg.constrained:
-        # the support-surface tests are constraints of the model, checked on a sample of the whole
-        # map for every hypothesis: the best plane that passes them, not the best plane, is tested
-        # on the full map (a single best hypothesis near a test's threshold made the verdict a
-        # lottery of the RANSAC seed)
-        allyx = ok.nonzero()
-        pa = allyx[torch.randint(allyx.shape[0], (min(cfg.sample, allyx.shape[0]),), generator=g)]
-        q = torch.stack([pa[:, 1].double(), pa[:, 0].double(), disparity[pa[:, 0], pa[:, 1]].double()], 1)
-        score = score.masked_fill(~_passes_sampled(coef, q, tol, h, oriented, cfg), -1)
+    # the support-surface tests are constraints of the model, checked on a sample of the whole map
+    # for every hypothesis: the best plane that passes them, not the best plane, is tested on the
+    # full map (a single best hypothesis near a test's threshold made the verdict a lottery of the
+    # RANSAC seed)
+    allyx = ok.nonzero()
+    pa = allyx[torch.randint(allyx.shape[0], (min(cfg.sample, allyx.shape[0]),), generator=g)]
+    q = torch.stack([pa[:, 1].double(), pa[:, 0].double(), disparity[pa[:, 0], pa[:, 1]].double()], 1)
+    score = score.masked_fill(~_passes_sampled(coef, q, tol, h, oriented, cfg), -1)
     order = torch.argsort(score, descending=True, stable=True)
-    for i in order[:cfg.tries if cfg.constrained else 1].tolist():
+    for i in order[:cfg.tries].tolist():
         if int(score[i]) < 0:
             break
         plane = _verified(coef[i], pts, disparity, ok, n_valid, tol, min_b, cfg)
@@ -155,11 +155,12 @@ def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, ori
     inl = (pred - d).abs() < tol
     share = inl.float().mean(1)
     ok = share >= cfg.min_inlier_frac
+    hides = torch.ones_like(ok)  # the position rule's floor hides what lies beneath it
     if cfg.max_below_frac < 1.0:
         seen = pred > tol
         behind = seen & (d < pred - tol)
-        ok &= behind.sum(1) <= cfg.max_below_frac * seen.sum(1).clamp_min(1)
-    return ok & _either(cfg.rule, oriented, share >= cfg.support_frac)
+        hides = behind.sum(1) <= cfg.max_below_frac * seen.sum(1).clamp_min(1)
+    return ok & _either(cfg.rule, oriented & hides, share >= cfg.support_frac)
 
 
 def _either(rule: str, position, support):
@@ -206,36 +207,14 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     if frac < cfg.min_inlier_frac:
         return None
     seen = ok & (plane > tol)  # where the plane is in view
-    if cfg.max_below_frac < 1.0:  # share of the pixels where the plane is in view that lie behind it
+    if position and cfg.max_below_frac < 1.0:  # share of the pixels where the plane is in view behind it
         behind = seen & (d < plane - tol)
-        if int(behind.sum()) > cfg.max_below_frac * max(int(seen.sum()), 1):
-            return None
+        position = int(behind.sum()) <= cfg.max_below_frac * max(int(seen.sum()), 1)
     support = cfg.rule != "position" and frac >= cfg.support_frac \
         and largest_protrusion(seen & (d > plane + tol)) <= cfg.max_protrusion_frac * n_valid
     if not _either(cfg.rule, position, support):
         return None
-    if cfg.foot_frac > 0:  # a refinement of the mask, not evidence against the plane: after the tests
-        mask &= ~protrusion_feet(d - plane, ok, tol, max(1, round(cfg.foot_frac * min(h, w))))
-        frac = int(mask.sum()) / n_valid
     return GroundPlane(a, b, c, tol, mask, frac, support)
-
-
-def protrusion_feet(residual: torch.Tensor, ok: torch.Tensor, tol: float, radius: int) -> torch.Tensor:
-    """Pixels within ``radius`` px of a protrusion: of a pixel above the plane's band (more than
-    ``tol`` above it) that survives an opening with a 3 × 3 square (a speck of matching noise
-    does not). The band holds the foot of every object standing on the plane — its
-    faces cross the plane's disparity where they meet it — and this takes it out.
-
-    Shape:
-        ``residual`` (disparity − plane, px), ``ok`` ``(H, W)`` → ``(H, W)`` bool.
-    """
-    import cv2
-    import numpy as np
-
-    core = (ok & (residual > tol)).numpy().astype(np.uint8)
-    core = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-    return torch.from_numpy(cv2.dilate(core, disc) > 0)
 
 
 def largest_protrusion(above: torch.Tensor) -> int:

@@ -4,19 +4,24 @@ Neurons that lie close on the SOM grid and have similar reference disparities fo
 area; a "disturbed" (dissimilar) neuron between two similar ones separates them, because areas
 grow only through grid-adjacent, similar pairs (connected components of that graph).
 
-Everything works on neuron-level statistics (``neuron_stats``: pixel count, mean disparity, box and
-the image-space boundary between segments), computed in one pass over the label map, so recognition
-costs O(K²) whatever the image size.
+Everything works on neuron-level statistics (``neuron_stats``: pixel count, mean disparity, box, the
+image-space boundary between segments and with the ground), computed in one pass over the label
+map, so recognition costs O(K²) whatever the image size.
 
 Selection of the kept areas:
 
 * ``"nearest"`` — the paper's rule: the area with the largest mean disparity;
 * ``"salient"`` — areas that stand out from their surroundings: contrast = mean disparity of the
-  area − boundary-weighted mean disparity of the segments touching it in the image; areas larger
-  than ``max_area_frac`` of the valid pixels or smaller than ``min_area_frac`` are rejected, the rest
-  those in front of their surroundings (contrast ≥ 0) ranked by contrast × ``area_frac **
-  size_power``, at most ``max_areas``;
-* ``"all"`` — every area passing the size limits.
+  area − boundary-weighted mean disparity of what touches it in the image: the segments around it
+  and, where the ground plane was cut out of the map, the ground pixels along its outline that lie
+  *behind* the segment they touch (:func:`surround_pairs`). A support surface is background where
+  it runs behind an object (a floor seen from above, the floor beyond a table's edge); where it
+  lies at or in front of the object's disparity — the floor in front of an object's foot, beside
+  it in a forward view — it says nothing about the object's salience and is left out. Without
+  that, an object the ground cut isolates from every segment had no contrast at all. The areas in
+  front of their surroundings (contrast ≥ 0) are ranked by contrast × ``area_frac ** size_power``,
+  at most ``max_areas``;
+* ``"all"`` — every area, nearest first.
 
 What happens to the selected areas afterwards (joining adjacent segments, box refinement, growing,
 the purity test) is in :mod:`somtorch.tasks.refine`; :func:`~somtorch.tasks.detect.kept_areas` runs
@@ -46,6 +51,9 @@ class NeuronStats:
         boundary: image-space boundary length between segments ``(K, K)`` (4-connected pixel pairs).
         d_range: (min, max) disparity of the map.
         d_robust: (5th, 95th) percentile of the disparity of the map.
+        ground_count: per segment, its 4-connected pixel pairs with the unsegmented valid pixels
+            (the removed ground plane) ``(K,)``, or None.
+        ground_sum: the disparity of those neighbours, summed per segment ``(K,)``, or None.
         perimeter: boundary length of each segment with other segments ``(K,)``.
     """
 
@@ -55,6 +63,8 @@ class NeuronStats:
     boundary: torch.Tensor
     d_range: tuple[float, float]
     d_robust: tuple[float, float]
+    ground_count: torch.Tensor | None = None
+    ground_sum: torch.Tensor | None = None
 
     @property
     def perimeter(self) -> torch.Tensor:
@@ -119,7 +129,8 @@ def disparity_spread(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[tupl
 
 
 def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int, *,
-                 spread: tuple[tuple[float, float], tuple[float, float]] | None = None) -> NeuronStats:
+                 spread: tuple[tuple[float, float], tuple[float, float]] | None = None,
+                 surround: tuple[torch.Tensor, torch.Tensor] | None = None) -> NeuronStats:
     """Statistics of the segments of one label map.
 
     Every statistic comes from one pass over the map: bincounts on labels, on (row, label) and
@@ -128,6 +139,8 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     Args:
         spread: :func:`disparity_spread` of ``disparity`` over ``labels >= 0`` if already known
             (computed here otherwise).
+        surround: :func:`surround_pairs` of the map (the same for every member): the segments'
+            boundary with the unsegmented valid pixels (the ground) is counted too.
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 invalid), ``disparity`` ``(H, W)``.
@@ -166,7 +179,39 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
 
     boundary = symmetric(torch.bincount(flat, minlength=(k + 1) ** 2))
     d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
-    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust)
+    g_count = g_sum = None
+    if surround is not None:
+        idx, d_out = surround
+        keys = labels.reshape(-1)[idx]
+        behind = d_out < mean_d[keys]  # the support is background only where it lies behind the segment
+        keys, d_out = keys[behind], d_out[behind]
+        g_count = torch.bincount(keys, minlength=k).double()
+        g_sum = torch.bincount(keys, weights=d_out, minlength=k).double()  # long when empty
+    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, g_count, g_sum)
+
+
+def surround_pairs(segmented: torch.Tensor, valid: torch.Tensor, disparity: torch.Tensor
+                   ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The 4-connected pixel pairs of a segmented pixel and a valid pixel left out of the
+    segmentation (the removed ground plane): the flat index of the segmented pixel and the
+    disparity of the other, one row per pair. They depend on which pixels are segmented, not on
+    the labels, so every member of an ensemble shares them (``neuron_stats(surround=…)``).
+
+    Shape:
+        ``segmented``, ``valid``, ``disparity`` ``(H, W)`` → ``(P,)`` long, ``(P,)`` float64.
+    """
+    h, w = segmented.shape
+    out = valid & ~segmented
+    flat = torch.arange(h * w).view(h, w)
+    d = disparity.double()
+    idx, dd = [], []
+    for a, b in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+                 ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
+        for s, o in ((a, b), (b, a)):  # the segmented side, the other side
+            m = segmented[s] & out[o]
+            idx.append(flat[s][m])
+            dd.append(d[o][m])
+    return torch.cat(idx), torch.cat(dd)
 
 
 def _components(adj: torch.Tensor) -> list[list[int]]:
@@ -238,7 +283,11 @@ def areas_of(comps: list[list[int]], stats: NeuronStats) -> list[ObjectArea]:
     mean = (onehot @ (md * cnt)) / n_px.clamp_min(1.0)
     border = (onehot @ stats.boundary) * (1.0 - onehot)  # (C, K) boundary with the segments outside
     b_len = border.sum(1)
-    contrast = torch.where(b_len > 0, mean - (border @ md) / b_len.clamp_min(1e-300), torch.zeros_like(mean))
+    b_sum = border @ md
+    if stats.ground_count is not None:  # the removed ground around it is a neighbour too
+        b_len = b_len + onehot @ stats.ground_count
+        b_sum = b_sum + onehot @ stats.ground_sum
+    contrast = torch.where(b_len > 0, mean - b_sum / b_len.clamp_min(1e-300), torch.zeros_like(mean))
     member = (onehot > 0) & (stats.count > 0)[None, :]  # (C, K): its non-empty segments
     big = torch.iinfo(torch.long).max
     x0 = torch.where(member, stats.box[None, :, 0], big).amin(1)
@@ -262,12 +311,11 @@ def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | 
     if cfg.select == "nearest":
         ranked = sorted(areas, key=lambda a: -a.mean_disparity)[:1]
     else:
-        ok = [a for a in areas if cfg.min_area_frac <= a.area_frac <= cfg.max_area_frac]
         if cfg.select == "salient":
-            ok = [a for a in ok if a.contrast >= 0]  # in front of its surroundings, or not salient
+            ok = [a for a in areas if a.contrast >= 0]  # in front of its surroundings, or not salient
             ranked = sorted(ok, key=lambda a: -rank_score(a, cfg))
         else:
-            ranked = sorted(ok, key=lambda a: -a.mean_disparity)
+            ranked = sorted(areas, key=lambda a: -a.mean_disparity)
         ranked = ranked[:cfg.max_areas]
     for i, a in enumerate(ranked):
         a.rank = i

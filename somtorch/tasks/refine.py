@@ -26,7 +26,7 @@ _D = AreaConfig  # the defaults of the helpers below are those of the config
 
 
 def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float = _D.merge,
-                   min_boundary: float = _D.min_boundary, max_area_frac: float = 1.0, exclude: torch.Tensor | None = None) -> list[ObjectArea]:
+                   min_boundary: float = _D.min_boundary, exclude: torch.Tensor | None = None) -> list[ObjectArea]:
     """Join to each kept area the segments that are other parts of the same object (``AreaConfig.merge``).
 
     A segment (one neuron's pixels) joins if it touches the growing group in the image (their common
@@ -34,8 +34,7 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
     mean disparity differs from the kept area's by at most ``ratio ×`` the kept area's contrast:
     a motorcycle's front wheel, the far side of a toy, the top of a slanted box, which the
     similarity rule put into other areas (often together with background). Joining repeats, one
-    ring of segments at a time, until nothing joins or the next ring would take the group beyond
-    ``max_area_frac`` of the valid pixels. A segment joins at most one group; a kept area that a
+    ring of segments at a time, until nothing joins. A segment joins at most one group; a kept area that a
     better-ranked one absorbed is dropped.
 
     ``exclude`` ``(K,)`` bool marks segments that may not join (those of areas kept already).
@@ -62,7 +61,7 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
         while True:
             shared = stats.boundary[:, group].sum(1)
             ring = ~group & ~taken & similar & (shared > 0) & (shared >= min_boundary * per)
-            if not bool(ring.any()) or float(stats.count[group | ring].sum()) > max_area_frac * total:
+            if not bool(ring.any()):
                 break
             group |= ring
         taken |= group

@@ -121,7 +121,7 @@ def test_stereo_pair_without_a_left_image_is_missing():
     ("ensemble=two", "ensemble"),
     ("objects.select=bogus", "bogus"),
     ("objects.connectivity=6", "connectivity"),
-    ("objects.max_area_frac=2.0", "max_area_frac"),
+    ("objects.keep_budget=2.0", "keep_budget"),
 ])
 def test_typos_wrong_types_and_bad_values_fail_at_composition(override, names):
     errors = (ConfigCompositionException, ValidationError, ConfigAttributeError, ValueError)

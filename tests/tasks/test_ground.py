@@ -61,7 +61,7 @@ def test_a_fronto_parallel_wall_and_a_disabled_search_give_no_plane():
 def test_the_best_plane_that_passes_the_tests_is_found_not_the_best_plane_refused():
     # a ramp over the left 70 % of the image, up to its top row, holds more of the lower half than
     # the floor at the right: it is the best hypothesis by inliers but fails the top and behind
-    # tests. The plain search tests only it (no plane); the constrained one finds the floor.
+    # tests (position rule). The search with the tests as constraints finds the floor.
     ys = torch.arange(H, dtype=torch.float32)[:, None].expand(H, W)
     xs = torch.arange(W)[None, :].expand(H, W)
     d = torch.where(ys > 44, 0.5 * (ys - 40), torch.full((H, W), 2.0))
@@ -69,8 +69,7 @@ def test_the_best_plane_that_passes_the_tests_is_found_not_the_best_plane_refuse
     d = torch.where(ramp, 0.3 * ys + 20.0, d).contiguous()
     valid = torch.ones(H, W, dtype=torch.bool)
     slope = 0.25  # the ramp spans 0.7 of the range over the image height: let it be a hypothesis
-    assert fit_ground_plane(d, valid, GroundConfig(constrained=False, min_slope_frac=slope)) is None
-    g = fit_ground_plane(d, valid, GroundConfig(min_slope_frac=slope))
+    g = fit_ground_plane(d, valid, GroundConfig(rule="position", min_slope_frac=slope))
     assert g is not None and abs(g.b - 0.5) < 0.01 and abs(g.a) < 0.01
     assert not bool(g.mask[ramp].any()) and bool(g.mask[110, W - 5])
 

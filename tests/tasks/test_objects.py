@@ -18,7 +18,7 @@ from somtorch.tasks.objects import (AreaConfig, ObjectArea, disparity_spread, fi
 ROWS, COLS, B = 4, 7, 5
 # conf/objects/paper.yaml: keep the nearest area, no size or contrast limits
 # the paper preset (conf/objects/paper.yaml): grid links, full-range spread, 10 % similarity, nearest area
-PAPER = dict(select="nearest", max_area_frac=1.0, min_area_frac=0.0, link="grid", spread="range",
+PAPER = dict(select="nearest", link="grid", spread="range",
              similarity=0.1)
 
 
@@ -129,8 +129,8 @@ def test_a_far_blob_on_a_near_background_has_negative_contrast_and_is_not_salien
     areas, stats = _blob_scene(blob_d=10.0, back_d=40.0)
     blob = next(a for a in areas if a.neurons == [1])
     assert blob.contrast == pytest.approx(-30.0)
-    kept = select_areas(areas, stats, AreaConfig(select="salient", min_area_frac=0.0))
-    assert kept == []  # the only area within the size limits recedes: nothing stands out
+    kept = select_areas(areas, stats, AreaConfig(select="salient"))
+    assert [a.neurons for a in kept] == [[0]]  # the blob recedes: what stands out is the near surround
 
 
 def test_isolated_area_without_neighbours_has_zero_contrast():
@@ -163,22 +163,20 @@ def test_select_nearest_keeps_the_area_with_the_largest_mean_disparity():
     assert best.mean_disparity == max(a.mean_disparity for a in areas)
 
 
-def test_select_all_applies_the_size_limits_and_ranks_by_disparity():
+def test_select_all_ranks_every_area_by_disparity():
     ref = _three_plateaus()
-    cfg = AreaConfig(select="all", max_areas=5, max_area_frac=0.5, min_area_frac=0.0)
+    cfg = AreaConfig(select="all", max_areas=5)
     areas, stats = _areas(ref, cfg)
     kept = select_areas(areas, stats, cfg)
-    assert [sorted(a.neurons) for a in kept] == [[0, 1, 2], [27]]  # the 24-neuron background is > 50 %
-    assert [a.rank for a in kept] == [0, 1]
-    small = dataclasses.replace(cfg, min_area_frac=0.05)  # the single neuron 27 holds 1/28 < 5 %
-    assert [sorted(a.neurons) for a in select_areas(areas, stats, small)] == [[0, 1, 2]]
+    assert [sorted(a.neurons) for a in kept] == [[0, 1, 2], [27], sorted(set(range(28)) - {0, 1, 2, 27})]
+    assert [a.rank for a in kept] == [0, 1, 2]
     capped = dataclasses.replace(cfg, max_areas=1)
     assert [sorted(a.neurons) for a in select_areas(areas, stats, capped)] == [[0, 1, 2]]
 
 
 def test_select_salient_ranks_by_contrast_and_drops_areas_behind_their_surroundings():
     ref = _three_plateaus()
-    cfg = AreaConfig(select="salient", max_areas=3, min_area_frac=0.0, size_power=0.0)
+    cfg = AreaConfig(select="salient", max_areas=3, size_power=0.0)
     areas, stats = _areas(ref, cfg)
     kept = select_areas(areas, stats, cfg)
     assert [sorted(a.neurons) for a in kept] == [[0, 1, 2], [27]]  # contrast 40 > 20; background < 0
@@ -236,8 +234,7 @@ def test_neuron_stats_rejects_bad_inputs():
 @pytest.mark.parametrize("kwargs", [
     {"similarity": 0.0}, {"similarity": -0.1}, {"similarity": float("nan")},
     {"connectivity": 6}, {"select": "bogus"}, {"max_areas": 0},
-    {"size_power": -0.01}, {"max_area_frac": 0.0}, {"max_area_frac": 1.5},
-    {"min_area_frac": -0.1}, {"min_area_frac": 0.5, "max_area_frac": 0.5},
+    {"size_power": -0.01},
     {"box_quantile": 0.5}, {"box_quantile": -0.01}, {"ground_clutter": -1.0}, {"merge": -0.5},
     {"merge": float("nan")}, {"min_purity": 1.5}, {"min_purity": -0.1}, {"purity_candidates": 0},
     {"min_solidity": 1.5}, {"min_solidity": -0.1}, {"min_solidity": float("nan")}, {"solidity_size": 0.0},
