@@ -30,8 +30,10 @@ def test_defaults_give_useful_hits_on_the_development_scenes(shared_data, name):
     useful = sum(s.useful_hit for s in scores)
     assert useful >= BASELINE["gates"][name], f"{name}: {useful}/{n} useful hits"
     # useful = found AND reduced: the mean reduction of the hits is within 10 points of x_opt
+    # (a wider margin where baseline.json records why)
+    margin = BASELINE["reduction_margin"].get(name, BASELINE["reduction_margin"]["default"])
     hits = [s.reduction_union for s in scores if s.useful_hit]
-    assert sum(hits) / len(hits) >= scores[0].x_opt - 10.0
+    assert sum(hits) / len(hits) >= scores[0].x_opt - margin
     assert not any(m.no_object for m in result.members if m.score.useful_hit)
 
 

@@ -47,6 +47,23 @@ def test_a_plane_with_the_scene_behind_it_is_not_the_support_surface():
     assert fit_ground_plane(d, valid, GroundConfig(max_below_frac=0.6)) is not None
 
 
+def test_a_support_plane_may_have_the_floor_behind_its_edges_a_position_plane_may_not():
+    # a table top seen from above fills 3/4 of the view, the floor beyond its edges lies behind
+    # it: the support rule verifies it (most of the view, nothing standing on it is large), and a
+    # support surface need not hide what lies beyond its edges; the position rule's floor must
+    ys = torch.arange(H, dtype=torch.float32)[:, None].expand(H, W)
+    xs = torch.arange(W)[None, :].expand(H, W)
+    table = (ys >= 15) & (xs >= 10) & (xs < W - 10)
+    d = torch.where(table, 20.0 + 0.06 * ys, torch.full((H, W), 5.0)).contiguous()
+    valid = torch.ones(H, W, dtype=torch.bool)
+    g = fit_ground_plane(d, valid, GroundConfig())
+    assert g is not None and g.support and abs(g.inlier_frac - float(table.float().mean())) < 0.01
+    behind = (d < g.disparity(H, W) - g.tol) & (g.disparity(H, W) > g.tol)
+    assert float(behind.float().mean()) > GroundConfig().max_below_frac  # more than a floor may hide
+    pos = fit_ground_plane(d, valid, GroundConfig(rule="position", min_slope_frac=0.0))
+    assert pos is None or not bool((pos.mask & table).any())  # the floor, if any; never the table top
+
+
 def test_a_fronto_parallel_wall_and_a_disabled_search_give_no_plane():
     valid = torch.ones(H, W, dtype=torch.bool)
     # by position, a plane of constant disparity is a wall, not a floor ...

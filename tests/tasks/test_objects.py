@@ -13,7 +13,7 @@ import torch
 
 from somtorch.core.grid import grid_sqdist
 from somtorch.tasks.objects import (AreaConfig, ObjectArea, disparity_spread, find_object_areas, neuron_stats,
-                                    select_areas)
+                                    select_areas, surround_pairs)
 
 ROWS, COLS, B = 4, 7, 5
 # conf/objects/paper.yaml: keep the nearest area, no size or contrast limits
@@ -138,6 +138,55 @@ def test_isolated_area_without_neighbours_has_zero_contrast():
     stats = neuron_stats(labels, torch.full((5, 5), 3.0, dtype=torch.float64), 1)
     (area,) = find_object_areas(torch.tensor([3.0]), grid_sqdist(1, 1), stats, AreaConfig(**PAPER))
     assert area.contrast == 0.0 and area.area_frac == 1.0 and area.box == (0, 0, 4, 4)
+
+
+def test_surround_pairs_match_a_pixel_by_pixel_reference():
+    g = torch.Generator().manual_seed(3)
+    h, w = 13, 17
+    valid = torch.rand(h, w, generator=g) > 0.15
+    segmented = valid & (torch.rand(h, w, generator=g) > 0.4)
+    disp = torch.rand(h, w, generator=g, dtype=torch.float64) * 50
+    labels = torch.where(segmented, torch.randint(0, 4, (h, w), generator=g), -1)
+    idx, d_out = surround_pairs(segmented, valid, disp)
+    want = {}
+    for y in range(h):
+        for x in range(w):
+            for dy, dx in ((0, 1), (1, 0), (0, -1), (-1, 0)):
+                yy, xx = y + dy, x + dx
+                if 0 <= yy < h and 0 <= xx < w and segmented[y, x] and valid[yy, xx] and not segmented[yy, xx]:
+                    want.setdefault(y * w + x, []).append(float(disp[yy, xx]))
+    got = {}
+    for i, d in zip(idx.tolist(), d_out.tolist()):
+        got.setdefault(i, []).append(d)
+    assert {k: sorted(v) for k, v in got.items()} == {k: sorted(v) for k, v in want.items()}
+    stats = neuron_stats(labels, disp, 4, surround=(idx, d_out))
+    for n in range(4):  # per segment: its pairs with ground pixels behind its own mean disparity
+        ref = [d for i, ds in want.items() for d in ds
+               if int(labels.view(-1)[i]) == n and d < float(stats.mean_d[n])]
+        assert int(stats.ground_count[n]) == len(ref)
+        assert float(stats.ground_sum[n]) == pytest.approx(sum(ref))
+
+
+def _on_ground(obj_d: float, ground_d: float):
+    """A square segment (neuron 0) in a map whose every other valid pixel is the cut ground."""
+    labels = torch.full((30, 40), -1, dtype=torch.long)
+    labels[10:20, 15:25] = 0
+    disp = torch.where(labels == 0, obj_d, ground_d).double()
+    segmented = labels >= 0
+    stats = neuron_stats(labels, disp, 1, surround=surround_pairs(segmented, torch.ones_like(segmented), disp))
+    (area,) = find_object_areas(torch.tensor([obj_d]), grid_sqdist(1, 1), stats, AreaConfig())
+    return area, stats
+
+
+def test_the_ground_behind_an_area_is_its_background_and_the_ground_in_front_says_nothing():
+    # an object the ground cut isolates from every segment: seen from above, the floor around it is
+    # behind it, which is its contrast; without the ground it had none (nothing to compare with)
+    area, stats = _on_ground(obj_d=30.0, ground_d=20.0)
+    assert area.contrast == pytest.approx(10.0)
+    assert int(stats.ground_count[0]) == 40  # its outline: 4 sides of 10 px
+    # ground at or in front of its disparity (the floor before an object's foot) is left out
+    area, stats = _on_ground(obj_d=20.0, ground_d=30.0)
+    assert area.contrast == 0.0 and int(stats.ground_count[0]) == 0
 
 
 # --------------------------------------------------------------------------------- selection
