@@ -57,7 +57,9 @@ def test_purity_and_solidity_tests_reject_sgbm_junk_on_a_computed_disparity_map(
     """ETH3D terrace with the disparity computed by our SGBM instead of the ground truth: the most
     contrasty area is junk at the left border (no match within the search range) and speckles, which
     the purity test skips, and the solidity test alone mostly too (20 seeds, measured 18 useful hits
-    with both, 16 with the solidity test only, 9 with neither; at objects.map_stride 1: 19 / 17 / 8)."""
+    with both, 16 with the solidity test only, 9 with neither; at objects.map_stride 1: 19 / 17 / 8).
+    Since session 10 the ground behind an area counts in its contrast, which ranks the terrace above
+    the junk more often: 20 / 19 / 14."""
     from somtorch.tasks.objects import AreaConfig
 
     scene = load_frame(frames(names=["eth3d_terrace_sgbm"])[0], shared_data)
@@ -67,7 +69,7 @@ def test_purity_and_solidity_tests_reject_sgbm_junk_on_a_computed_disparity_map(
         useful[purity, solid] = sum(m.score.useful_hit for m in run_pipeline(scene, cfg, metrics=False).members)
     assert useful[0.25, 0.25] >= 15, useful
     assert useful[0.0, 0.25] >= 12, useful
-    assert useful[0.0, 0.0] <= min(10, useful[0.25, 0.25] - 7), useful  # the checks are what helps
+    assert useful[0.0, 0.0] <= min(16, useful[0.25, 0.25] - 4), useful  # the checks still help
 
 
 def test_solidity_test_rejects_ceiling_streaks_on_an_unlabelled_sgbm_scene(shared_data):
