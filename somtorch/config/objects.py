@@ -120,7 +120,6 @@ class AreaConfig(Validated):
             share of pixels through an opening with a square of ``solidity_size ×`` the shorter
             image side, else the next candidate is tried (0 = off).
         solidity_size: side of that square as a share of the shorter image side.
-        purity_candidates: how many ranked candidates the purity and solidity tests may try.
         grow_stride: the box refinement and the solidity work on every n-th pixel.
         map_stride: the whole object step reads every n-th pixel of the label map in y and x
             (1 = all; 2 = a quarter of them, about 3× faster): boxes are mapped back to full size
@@ -142,7 +141,7 @@ class AreaConfig(Validated):
         "size_power": NON_NEGATIVE, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
-        "solidity_size": Interval(0, 0.5, open_lo=True), "purity_candidates": POSITIVE_INT,
+        "solidity_size": Interval(0, 0.5, open_lo=True),
         "select": Choice(options.SELECTIONS), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
         "keep_budget": Interval(0, 1, open_lo=True),
         "fail_safe": BOOL,
@@ -164,7 +163,6 @@ class AreaConfig(Validated):
     min_purity: float = 0.25
     min_solidity: float = 0.25
     solidity_size: float = 0.02
-    purity_candidates: int = 5
     select: str = "salient"
     max_areas: int = 4
     keep_ratio: float = 0.2

@@ -112,8 +112,8 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     dense map's standard). After the first kept area, a further one must score at least
     ``cfg.keep_ratio ×`` the best candidate's rank score and, with ``cfg.keep_budget < 1``, leave
     the union of the kept boxes within that share of the valid pixels (else it is skipped and the
-    next candidate tried). At most ``cfg.max_areas`` are kept and
-    ``cfg.max_areas + cfg.purity_candidates − 1`` candidates tried. If none passed: the
+    next candidate tried). At most ``cfg.max_areas`` are kept, out of the ``cfg.max_areas``
+    best-ranked candidates (a failed check leaves room for the next of them). If none passed: the
     best-ranked candidate, or nothing with ``cfg.fail_safe`` (the caller keeps the whole map).
 
     Every kept area carries its ``purity``, ``solidity`` (the opened share of its pixels, ≤ 1),
@@ -124,10 +124,8 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     Shape:
         ``labels`` ``(H, W)``.
     """
-    checks = cfg.min_purity > 0 or cfg.min_solidity > 0
     areas_max = cfg.max_areas if cfg.keep_ratio < 1 else 1  # a ratio of 1 keeps only the best
-    tries = areas_max + (cfg.purity_candidates - 1 if checks else 0)
-    ranked = select_areas(areas, stats, replace(cfg, max_areas=tries))
+    ranked = select_areas(areas, stats, replace(cfg, max_areas=areas_max))
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first = [], None
     lab_s = labels[::cfg.grow_stride, ::cfg.grow_stride]  # as in the box refinement

@@ -285,7 +285,7 @@ def test_neuron_stats_rejects_bad_inputs():
     {"connectivity": 6}, {"select": "bogus"}, {"max_areas": 0},
     {"size_power": -0.01},
     {"box_quantile": 0.5}, {"box_quantile": -0.01}, {"ground_clutter": -1.0}, {"merge": -0.5},
-    {"merge": float("nan")}, {"min_purity": 1.5}, {"min_purity": -0.1}, {"purity_candidates": 0},
+    {"merge": float("nan")}, {"min_purity": 1.5}, {"min_purity": -0.1},
     {"min_solidity": 1.5}, {"min_solidity": -0.1}, {"min_solidity": float("nan")}, {"solidity_size": 0.0},
     {"solidity_size": 0.6}, {"solidity_size": float("nan")},
 ])
