@@ -46,8 +46,8 @@ __all__ = ["Estimate", "ResourceError", "available_memory", "check", "combine", 
 
 GIB = 1 << 30
 _FIXED = 192 << 20  # allocator slack, chunk buffers of the BMU search (16 MiB of scores, a few of them); the
-# same run's peak varies by ~70 MB with the thread count the pipeline picks on a busy machine (739 and 808 MB
-# measured against 731 MB estimated with 96 MiB here, ensemble 40, every pixel, 2026-12-03)
+# whole-suite runs that measured 739, 808 and 864 MB for ensemble 40 on every pixel (against 731-832 MB
+# estimated) read ru_maxrss, which keeps the xdist parent's size across exec: its own memory is 370-380 MB
 _CHUNK = 1 << 22  # somtorch.core.distance.DEFAULT_CHUNK_ELEMENTS
 _BLOCK = 4096  # somtorch.core.training.BLOCK_STEPS
 # seconds per unit of work: one thread of the 2-core development CPU with the native kernel, fitted

@@ -18,19 +18,24 @@ ROOT = Path(__file__).resolve().parents[1]
 FACTOR = 2.5  # the estimate is an upper bound of the measured increase and at most FACTOR times it
 
 _PEAK = textwrap.dedent("""
-    import json, os, resource, sys
+    import json, os, sys, threading, time
     import torch
-    def rss():
-        return int(open('/proc/self/statm').read().split()[1]) * os.sysconf('SC_PAGE_SIZE')
+    def anon():  # the process's anonymous memory: what it allocated, not the library pages it maps
+        with open('/proc/self/status') as f:
+            return next(int(l.split()[1]) * 1024 for l in f if l.startswith('RssAnon:'))
+    peak, stop = [0], threading.Event()
+    def watch():  # polled every millisecond: the stages' buffers live far longer than that
+        while not stop.is_set():
+            peak[0] = max(peak[0], anon())
+            time.sleep(0.001)
     case = sys.argv[1]
     if case == "train":
         from somtorch.core import SOM
         from somtorch.resources import estimate
         x = torch.rand(2000, 3, generator=torch.Generator().manual_seed(0))
         SOM(4, 4, 3, ensemble=2, seed=0).fit(x, mode="batch", epochs=1, progress=False)  # warm-up
-        base = rss()
-        SOM(32, 32, 3, ensemble=100, seed=0).fit(x, mode="batch", epochs=2, progress=False)
-        est = estimate(height=1, width=2000, valid=2000, train=2000, units=1024, members=100, epochs=2)
+        run = lambda: SOM(32, 32, 3, ensemble=100, seed=0).fit(x, mode="batch", epochs=2, progress=False)
+        est = lambda: estimate(height=1, width=2000, valid=2000, train=2000, units=1024, members=100, epochs=2)
     else:
         from somtorch.config import with_overrides
         from somtorch.disparity import load_scene
@@ -38,18 +43,27 @@ _PEAK = textwrap.dedent("""
         scene = load_scene("motorcycle")
         cfg = with_overrides(PipelineConfig(), json.loads(case))
         run_pipeline(scene, with_overrides(cfg, {"ensemble": 1, "train.epochs": 1}))  # warm-up
-        base = rss()
-        run_pipeline(scene, cfg)
-        est = resource_estimate(scene, cfg)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    print(json.dumps({"measured": peak - base, "estimate": est.peak_bytes}))
+        run = lambda: run_pipeline(scene, cfg)
+        est = lambda: resource_estimate(scene, cfg)
+    base = anon()
+    t = threading.Thread(target=watch, daemon=True)
+    t.start()
+    run()
+    stop.set()
+    t.join()
+    print(json.dumps({"measured": max(peak[0], anon()) - base, "estimate": est().peak_bytes}))
 """)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["train", '{"ensemble": 400}', '{"ensemble": 40, "features.train_stride": 1}'])
 def test_estimate_bounds_the_measured_peak(case):
-    """Peak RSS increase of a real run (fresh process, after a warm-up) ≤ estimate ≤ FACTOR × it."""
+    """Peak increase of the anonymous memory of a real run (fresh process, after a warm-up) ≤
+    estimate ≤ FACTOR × it. The run's own anonymous memory (``RssAnon``, polled), not
+    ``ru_maxrss``: on Linux a child keeps the high-water mark of the memory it shared with its
+    parent before ``exec`` — an xdist worker grown large in a whole-suite run — so the same run
+    measured 739, 808 and 864 MB there and 360-390 MB from a small parent (370-380 MB anonymous;
+    session 10, ``tests/disparity/test_bombs.py`` avoids it the same way)."""
     out = subprocess.run([sys.executable, "-c", _PEAK, case], capture_output=True, text=True, cwd=ROOT,
                          env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
     assert out.returncode == 0, out.stderr
