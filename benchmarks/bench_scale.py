@@ -11,7 +11,7 @@ Each size runs in a fresh subprocess: the Middlebury Motorcycle (embedded) is re
 :func:`somtorch.large.train_segment_large` computes the OR training features (stride 10) into a
 memory map, trains an 8×8 SOM with the chunked batch map (10 epochs) and labels every pixel into an
 ``int16`` memory map. Reported per size: seconds per stage, **peak resident memory** of the
-process (``ru_maxrss``, which includes the ~0.3–0.4 GB of the Python + torch runtime) against the
+process (``VmHWM``, which includes the ~0.3–0.4 GB of the Python + torch runtime) against the
 budget, and the fitted exponent of time against pixels (1 = linear).
 """
 
@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import resource
 import subprocess
 import sys
 import tempfile
@@ -61,7 +60,8 @@ def one(w: int, h: int, budget: int) -> dict:
         t_make = time.perf_counter() - t0
         res = train_segment_large(disp, d, memory_budget=budget)
         labelled = int((res.labels >= 0).sum())
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: KiB
+    # VmHWM, not ru_maxrss: a child's ru_maxrss keeps its parent's size before exec (Linux)
+    peak = int(next(ln for ln in open("/proc/self/status") if ln.startswith("VmHWM")).split()[1]) * 1024
     return {"width": w, "height": h, "pixels": w * h, "valid": res.n_valid, "train": res.n_train,
             "labelled": labelled, "block_rows": res.block_rows, "make_s": t_make, "timings_s": res.timings,
             "total_s": sum(res.timings.values()), "peak_rss_bytes": peak, "budget_bytes": budget}
