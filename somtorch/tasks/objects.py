@@ -52,7 +52,8 @@ class NeuronStats:
         d_range: (min, max) disparity of the map.
         d_robust: (5th, 95th) percentile of the disparity of the map.
         ground_count: per segment, its 4-connected pixel pairs with the unsegmented valid pixels
-            (the removed ground plane) ``(K,)``, or None.
+            (the removed ground plane) whose disparity lies below the segment's mean (the ground
+            behind it) ``(K,)``, or None.
         ground_sum: the disparity of those neighbours, summed per segment ``(K,)``, or None.
         perimeter: boundary length of each segment with other segments ``(K,)``.
     """
