@@ -18,16 +18,11 @@ ROOT = Path(__file__).resolve().parents[1]
 FACTOR = 2.5  # the estimate is an upper bound of the measured increase and at most FACTOR times it
 
 _PEAK = textwrap.dedent("""
-    import json, os, sys, threading, time
+    import json, sys
     import torch
-    def anon():  # the process's anonymous memory: what it allocated, not the library pages it maps
+    def kib(field):  # this process's own figures (its VmHWM starts afresh at exec, unlike ru_maxrss)
         with open('/proc/self/status') as f:
-            return next(int(l.split()[1]) * 1024 for l in f if l.startswith('RssAnon:'))
-    peak, stop = [0], threading.Event()
-    def watch():  # polled every millisecond: the stages' buffers live far longer than that
-        while not stop.is_set():
-            peak[0] = max(peak[0], anon())
-            time.sleep(0.001)
+            return next(int(l.split()[1]) for l in f if l.startswith(field + ':'))
     case = sys.argv[1]
     if case == "train":
         from somtorch.core import SOM
@@ -45,25 +40,23 @@ _PEAK = textwrap.dedent("""
         run_pipeline(scene, with_overrides(cfg, {"ensemble": 1, "train.epochs": 1}))  # warm-up
         run = lambda: run_pipeline(scene, cfg)
         est = lambda: resource_estimate(scene, cfg)
-    base = anon()
-    t = threading.Thread(target=watch, daemon=True)
-    t.start()
+    with open('/proc/self/clear_refs', 'w') as f:
+        f.write('5')  # the peak (VmHWM) starts again at the current RSS
+    base = kib('VmRSS')
     run()
-    stop.set()
-    t.join()
-    print(json.dumps({"measured": max(peak[0], anon()) - base, "estimate": est().peak_bytes}))
+    print(json.dumps({"measured": 1024 * (kib('VmHWM') - base), "estimate": est().peak_bytes}))
 """)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["train", '{"ensemble": 400}', '{"ensemble": 40, "features.train_stride": 1}'])
 def test_estimate_bounds_the_measured_peak(case):
-    """Peak increase of the anonymous memory of a real run (fresh process, after a warm-up) ≤
-    estimate ≤ FACTOR × it. The run's own anonymous memory (``RssAnon``, polled), not
-    ``ru_maxrss``: on Linux a child keeps the high-water mark of the memory it shared with its
-    parent before ``exec`` — an xdist worker grown large in a whole-suite run — so the same run
-    measured 739, 808 and 864 MB there and 360-390 MB from a small parent (370-380 MB anonymous;
-    session 10, ``tests/disparity/test_bombs.py`` avoids it the same way)."""
+    """Peak RSS increase of a real run (fresh process, after a warm-up) ≤ estimate ≤ FACTOR × it.
+    The peak is the process's own ``VmHWM`` (reset after the warm-up through ``clear_refs``, as
+    ``benchmarks/bench_learned.py`` does), not ``ru_maxrss``: on Linux a child keeps the high-water
+    mark of the memory it shared with its parent before ``exec`` — an xdist worker grown large in a
+    whole-suite run — so the same run measured 739, 808 and 864 MB there and 360-390 MB from a
+    small parent (session 10)."""
     out = subprocess.run([sys.executable, "-c", _PEAK, case], capture_output=True, text=True, cwd=ROOT,
                          env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300)
     assert out.returncode == 0, out.stderr
