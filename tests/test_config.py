@@ -64,7 +64,8 @@ def test_the_paper_preset_pins_every_value_that_differs_from_the_default():
     o = paper.objects
     assert (o.similarity, o.link, o.spread, o.select, o.merge, o.min_purity, o.min_solidity, o.fail_safe) == \
         (0.1, "grid", "range", "nearest", 0.0, 0.0, 0.0, False)
-    assert (o.box_coverage, o.box_quantile, o.ground_clutter, o.max_areas, o.drop_specks) == (1.0, 0.0, 0.0, 1, False)
+    assert (o.box_coverage, o.box_quantile, o.ground_clutter, o.max_areas, o.drop_specks) == \
+        (1.0, 0.0, 0.0, 1, False)
     r = paper.reduction
     assert (r.tolerance_px, r.tolerance_frac, r.tolerance_image) == (0, 0.05, 0.0)
 

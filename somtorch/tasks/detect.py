@@ -89,7 +89,8 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
         ``grid_d2`` ``(K, K)`` or None.
     """
     cfg = cfg or AreaConfig()
-    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread, surround=ctx.surround)
+    stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread,
+                         surround=ctx.surround)
     areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:
@@ -137,7 +138,8 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         confidence = rank_score(cand, cfg) / best if best > 0 else 1.0
         if kept and confidence < cfg.keep_ratio:
             break
-        joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary, exclude=taken)[0]
+        joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
+                                exclude=taken)[0]
         done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                           stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
                           clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)

@@ -26,7 +26,8 @@ _D = AreaConfig  # the defaults of the helpers below are those of the config
 
 
 def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float = _D.merge,
-                   min_boundary: float = _D.min_boundary, exclude: torch.Tensor | None = None) -> list[ObjectArea]:
+                   min_boundary: float = _D.min_boundary,
+                   exclude: torch.Tensor | None = None) -> list[ObjectArea]:
     """Join to each kept area the segments that are other parts of the same object (``AreaConfig.merge``).
 
     A segment (one neuron's pixels) joins if it touches the growing group in the image (their common
@@ -34,8 +35,8 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
     mean disparity differs from the kept area's by at most ``ratio ×`` the kept area's contrast:
     a motorcycle's front wheel, the far side of a toy, the top of a slanted box, which the
     similarity rule put into other areas (often together with background). Joining repeats, one
-    ring of segments at a time, until nothing joins. A segment joins at most one group; a kept area that a
-    better-ranked one absorbed is dropped.
+    ring of segments at a time, until nothing joins. A segment joins at most one group; a kept
+    area that a better-ranked one absorbed is dropped.
 
     ``exclude`` ``(K,)`` bool marks segments that may not join (those of areas kept already).
 

@@ -153,7 +153,8 @@ def test_surround_pairs_match_a_pixel_by_pixel_reference():
         for x in range(w):
             for dy, dx in ((0, 1), (1, 0), (0, -1), (-1, 0)):
                 yy, xx = y + dy, x + dx
-                if 0 <= yy < h and 0 <= xx < w and segmented[y, x] and valid[yy, xx] and not segmented[yy, xx]:
+                inside = 0 <= yy < h and 0 <= xx < w
+                if inside and segmented[y, x] and valid[yy, xx] and not segmented[yy, xx]:
                     want.setdefault(y * w + x, []).append(float(disp[yy, xx]))
     got = {}
     for i, d in zip(idx.tolist(), d_out.tolist()):
@@ -173,7 +174,8 @@ def _on_ground(obj_d: float, ground_d: float):
     labels[10:20, 15:25] = 0
     disp = torch.where(labels == 0, obj_d, ground_d).double()
     segmented = labels >= 0
-    stats = neuron_stats(labels, disp, 1, surround=surround_pairs(segmented, torch.ones_like(segmented), disp))
+    pairs = surround_pairs(segmented, torch.ones_like(segmented), disp)
+    stats = neuron_stats(labels, disp, 1, surround=pairs)
     (area,) = find_object_areas(torch.tensor([obj_d]), grid_sqdist(1, 1), stats, AreaConfig())
     return area, stats
 
