@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Optional
 
+from somtorch.config.options import SYNTH_FAMILIES
+
 __all__ = ["SynthConfig"]
 
 
@@ -23,8 +25,7 @@ class SynthConfig:
             ``~/.cache/somtorch/corpus`` (what ``experiments.datasets`` reads).
     """
 
-    families: list[str] = field(default_factory=lambda: ["stairs", "garden", "road", "room", "tabletop", "hands",
-                                                         "fence", "clutter"])
+    families: list[str] = field(default_factory=lambda: list(SYNTH_FAMILIES))
     cameras: list[str] = field(default_factory=lambda: ["oakd"])
     n: int = 10
     start: int = 0

@@ -33,6 +33,7 @@ if __name__ == "__main__":  # signals and --help answered before the heavy impor
 
 import json
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from functools import partial
@@ -273,6 +274,18 @@ def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]
     return out
 
 
+def _nulls_for_nan(obj: Any) -> Any:
+    """``obj`` with every NaN float replaced by ``None``: a macro over no real dataset is undefined,
+    and JSON has no NaN."""
+    if isinstance(obj, float):
+        return None if math.isnan(obj) else obj
+    if isinstance(obj, dict):
+        return {k: _nulls_for_nan(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_nulls_for_nan(v) for v in obj]
+    return obj
+
+
 ConfigStore.instance().store(name="validate_schema", node=ValidateConfig)
 
 
@@ -291,8 +304,12 @@ def main(dcfg: DictConfig) -> int:
         cfg: ValidateConfig = to_config(dcfg)
         with warnings_to_file(out / "runs.log", "validate"):  # thousands of runs: their warnings in a file
             report = evaluate(cfg, out / "runs.log")
-    write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": report})
+    write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": _nulls_for_nan(report)})
     m = report["summary"]["macro_real"]
+    if not any(r["real"] for r in report["rows"]):
+        log.warning("no real dataset among the frames: the real macro is undefined (null in validate.json) and "
+                    "the protocol adopts nothing; tables in %s", out / "validate.md")
+        return 0
     log.info("real macro useful-hit rate: default %.1f %%, in-sample %.1f %%, left-out %.1f %% (all-objects "
              "%.1f / %.1f / %.1f %%); tables in %s", *(100 * m[f"{p}_{r}"] for r in ("useful_hits", "all_objects_hits")
                                                    for p in ("default", "in_sample", "left_out")), out / "validate.md")

@@ -216,9 +216,7 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
     st = map_stride(scene, cfg)
     h, w = scene.disparity.shape
     with timer("objects"):  # every member segments the same pixels: one context for all
-        grow = cfg.features.stride_at(cfg.objects.grow_stride, h, w)
-        disp, valid, labels, g, ocfg = _strided(scene, seg.labels, ground,
-                                                replace(cfg.objects, map_stride=st, grow_stride=grow))
+        disp, valid, labels, g, ocfg = _strided(scene, seg.labels, ground, replace(cfg.objects, map_stride=st))
         ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg)
         integral = ctx.integral if st == 1 else valid_integral(scene.valid)  # the reduction's: full size
     obj_mask, x_opt = None, None
@@ -315,8 +313,7 @@ def map_stride(scene: Scene, cfg: PipelineConfig) -> int:
 def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg: AreaConfig):
     """The maps the object step reads: every ``cfg.map_stride``-th pixel in y and x (all at 1).
 
-    The ground plane is re-expressed in the sampled pixel coordinates and the refinement's own
-    sampling (``grow_stride``) divided by the stride, so that it keeps reading the same pixels.
+    The ground plane is re-expressed in the sampled pixel coordinates.
     """
     s = cfg.map_stride
     if s == 1:
@@ -325,7 +322,7 @@ def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg
                                                 ground.mask[::s, ::s].contiguous(), ground.inlier_frac,
                                                 ground.support)
     return (scene.disparity[::s, ::s].contiguous(), scene.valid[::s, ::s].contiguous(),
-            labels[:, ::s, ::s].contiguous(), g, replace(cfg, grow_stride=max(1, cfg.grow_stride // s)))
+            labels[:, ::s, ::s].contiguous(), g, cfg)
 
 
 def _full_size(area: ObjectArea, s: int, h: int, w: int) -> ObjectArea:

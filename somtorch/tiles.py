@@ -11,8 +11,8 @@ into a grid of tiles that overlap by ``overlap`` of a tile's side, runs steps 1a
    one map): an object cut by a tile border becomes one box again;
 2. **ranks globally**: a tile keeps the most salient thing *it* sees, even where that is
    background, so the reassembled areas are ranked with the object step's own score (contrast ×
-   area share of the whole map ^ ``size_power``) and kept under the same ``max_areas`` /
-   ``keep_ratio`` rule as one map's areas;
+   area share of the whole map ^ ``size_power``) and the ``max_areas`` best with a positive
+   score are kept, as one map's areas;
 3. reduces the whole map with the kept boxes (step 1d) and scores it like :func:`~somtorch.pipeline.run_pipeline`.
 
 Each tile is an independent problem (its own SOM, ground plane and disparity spread), which is
@@ -210,7 +210,7 @@ def run_tiled(scene: Scene, cfg: PipelineConfig | None = None, *, tiles: tuple[i
         for a in merged:
             a.score = max(a.contrast, 0.0) * (a.pixels / n_valid) ** oc.size_power
         merged.sort(key=lambda a: -a.score)
-        kept = [a for a in merged if merged[0].score > 0 and a.score >= oc.keep_ratio * merged[0].score][:oc.max_areas]
+        kept = [a for a in merged if a.score > 0][:oc.max_areas]
         if not kept:  # fail-safe, as one map: keep everything rather than nothing
             ys, xs = scene.valid.nonzero(as_tuple=True)
             kept = [TiledArea((int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())), n_valid, 0.0, 0.0, [])]

@@ -60,7 +60,7 @@ def test_the_paper_preset_pins_every_value_that_differs_from_the_default():
     paper = _composed("+preset=paper")
     assert (paper.som.rows, paper.som.cols) == (4, 7)
     assert (paper.train.mode, paper.features.normalize, paper.features.d_weight) == ("online", "minmax", 1.0)
-    assert paper.ground.enabled is False
+    assert paper.ground.rule == "none"
     o = paper.objects
     assert (o.similarity, o.link, o.spread, o.select, o.merge, o.min_purity, o.min_solidity, o.fail_safe) == \
         (0.1, "grid", "range", "nearest", 0.0, 0.0, 0.0, False)
@@ -73,7 +73,7 @@ def test_the_paper_preset_pins_every_value_that_differs_from_the_default():
 @pytest.mark.parametrize("cls, kwargs, words", [
     (AreaConfig, {"min_purity": 2.0}, ["objects.min_purity", "[0, 1]", "2.0"]),
     (AreaConfig, {"select": "largest"}, ["objects.select", "largest", "all, nearest, salient"]),
-    (AreaConfig, {"connectivity": 6}, ["objects.connectivity", "[4, 8]"]),
+    (AreaConfig, {"link": "diagonal"}, ["objects.link", "diagonal", "both, grid, image"]),
     (AreaConfig, {"keep_budget": 0.0}, ["objects.keep_budget", "(0, 1]"]),
     (TrainConfig, {"parallel": "data", "mode": "online"}, ["parallel='data'", "mode='online'"]),
     (GroundConfig, {"min_inlier_frac": -0.1}, ["ground.min_inlier_frac"]),

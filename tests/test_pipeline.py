@@ -200,7 +200,7 @@ def test_a_map_without_a_convincing_object_keeps_everything_flags_it_and_warns(c
     scene = scene_from_arrays(d, torch.ones(60, 80, dtype=torch.bool), name="plane")
     cfg = PipelineConfig(ensemble=3)
     cfg.objects.min_purity = 1.0  # nothing can pass
-    cfg.ground.enabled = False  # (the support test would take the whole plane as the floor)
+    cfg.ground.rule = "none"  # (the support test would take the whole plane as the floor)
     with caplog.at_level(logging.WARNING, logger="somtorch.pipeline"):
         res = run_pipeline(scene, cfg, metrics=False)
     assert all(m.no_object for m in res.members)

@@ -42,7 +42,7 @@ def test_crop_keeps_pixels_objects_and_shifts_the_camera():
 
 def test_an_object_across_all_tiles_is_reassembled_into_one_box():
     sc = _scene()
-    cfg = with_overrides(PipelineConfig(), {"ensemble": 2, "ground.enabled": False})
+    cfg = with_overrides(PipelineConfig(), {"ensemble": 2, "ground.rule": "none"})
     res = run_tiled(sc, cfg, tiles=(2, 2), overlap=0.1)
     assert len(res.windows) == 4 and len(res.members) == 2
     for m in res.members:
@@ -56,7 +56,7 @@ def test_an_object_across_all_tiles_is_reassembled_into_one_box():
 
 def test_worker_processes_give_the_same_boxes():
     sc = _scene()
-    cfg = with_overrides(PipelineConfig(), {"ensemble": 1, "ground.enabled": False})
+    cfg = with_overrides(PipelineConfig(), {"ensemble": 1, "ground.rule": "none"})
     here = run_tiled(sc, cfg, tiles=(1, 2), workers=0)
     pool = run_tiled(sc, cfg, tiles=(1, 2), workers=2)
     assert [a.box for a in here.members[0].kept] == [a.box for a in pool.members[0].kept]

@@ -77,7 +77,7 @@ class Choice:
 
 @dataclass(frozen=True)
 class OneOf:
-    """One of a few literal values (e.g. a connectivity of 4 or 8)."""
+    """One of a few literal values (e.g. a kind of parallelism)."""
 
     values: tuple
 

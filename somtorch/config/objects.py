@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import options
-from .constraints import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, OneOf, Validated
+from .constraints import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, Validated
 
 
 # ---------------------------------------------------------------------------------- ground plane
@@ -16,7 +16,7 @@ class GroundConfig(Validated):
     """The support surface (floor, road, table top), found by RANSAC in (x, y, d) and verified
     before removal.
 
-    Verification (``rule``): ``"position"`` — where a forward camera sees its floor (``min_slope_frac``,
+    Verification (``rule``): ``"none"`` — no ground handling (the paper's pipeline); ``"position"`` — where a forward camera sees its floor (``min_slope_frac``,
     tilt in x ≤ tilt in y; RANSAC on the lower image half); ``"support"`` — by what
     the plane supports, at any camera pitch (``support_frac`` of the pixels on it, the pixels above
     it in compact protrusions of at most ``max_protrusion_frac``; RANSAC on the whole map);
@@ -26,8 +26,7 @@ class GroundConfig(Validated):
     has the floor beyond its edges behind it.
 
     Attributes:
-        enabled: look for a ground plane at all.
-        rule: ``"position"``, ``"support"`` or ``"either"`` (above).
+        rule: ``"none"``, ``"position"``, ``"support"`` or ``"either"`` (above).
         tol_frac: inlier band half-width as a fraction of the map's disparity range (1st–99th
             percentile) …
         tol_px: … but at least this many px.
@@ -50,20 +49,17 @@ class GroundConfig(Validated):
         iterations: RANSAC hypotheses.
         sample: pixels drawn for RANSAC and for the tests (estimated on a sample for every
             hypothesis: the best plane that passes them is found, not the best plane refused).
-        seed: RANSAC seed (the result does not depend on the SOM seed).
-        tries: passing hypotheses tested on the full map at most, best first.
     """
 
     _group: ClassVar[str] = "ground"
     _constraints: ClassVar[dict[str, Any]] = {
-        "enabled": BOOL, "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
+        "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_below_frac": FRACTION,
-        "iterations": POSITIVE_INT, "sample": POSITIVE_INT, "seed": Interval(0, None, integer=True),
-        "tries": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
+        "iterations": POSITIVE_INT, "sample": POSITIVE_INT,
+        "support_frac": Interval(0, 1, open_lo=True),
         "max_protrusion_frac": FRACTION,
     }
 
-    enabled: bool = True
     rule: str = "either"
     tol_frac: float = 0.02
     tol_px: float = 0.5
@@ -72,8 +68,6 @@ class GroundConfig(Validated):
     max_below_frac: float = 0.1
     iterations: int = 400
     sample: int = 5000
-    seed: int = 0
-    tries: int = 5
     support_frac: float = 0.6
     max_protrusion_frac: float = 0.2
 
@@ -90,8 +84,7 @@ class AreaConfig(Validated):
     Linking — which neurons form one area:
         similarity: two linked neurons are similar if their reference disparities differ by less
             than ``similarity ×`` the map's disparity spread.
-        connectivity: 4 (grid rows/columns) or 8 (diagonals too) for ``link="grid"``.
-        link: ``"grid"`` (adjacent on the SOM grid, the paper's rule), ``"image"`` (their segments
+        link: ``"grid"`` (adjacent on the SOM grid: same row or column, one step; the paper's rule), ``"image"`` (their segments
             share a boundary in the image) or ``"both"``.
         spread: ``"range"`` (d_max − d_min, the paper's) or ``"robust"`` (5th–95th percentile).
         min_boundary: two segments touch if their common boundary is at least this share of the
@@ -102,8 +95,6 @@ class AreaConfig(Validated):
             contrast to the surrounding segments × ``area_frac ** size_power``) or ``"all"``.
         size_power: weight of the area's size in the salient ranking (0 = contrast alone).
         max_areas: how many areas are kept at most.
-        keep_ratio: with ``max_areas > 1``, a further area is kept only if its rank score is at
-            least this share of the best one's (1 = only ties; 0 = up to ``max_areas``).
         keep_budget: a further area is kept only if the union of the kept boxes then holds at most
             this share of the valid pixels (the data-reduction budget: every salient area that
             fits is kept, one that would make the reduction too small is skipped; the first area
@@ -120,10 +111,10 @@ class AreaConfig(Validated):
             share of pixels through an opening with a square of ``solidity_size ×`` the shorter
             image side, else the next candidate is tried (0 = off).
         solidity_size: side of that square as a share of the shorter image side.
-        grow_stride: the box refinement and the solidity work on every n-th pixel.
         map_stride: the whole object step reads every n-th pixel of the label map in y and x
-            (1 = all; 2 = a quarter of them, about 3× faster): boxes are mapped back to full size
-            and the reduction is computed on the full map.
+            (1 = all; 2 = a quarter of them, about 3× faster): the refinement and the solidity read
+            every pixel of that map, boxes are mapped back to full size and the reduction is
+            computed on the full map.
         box_coverage: the box covers the area's largest image-connected pieces up to this share of
             its pixels (1 = all).
         box_quantile: the box spans the ``q … 1 − q`` quantiles of the kept pixels' coordinates.
@@ -136,24 +127,22 @@ class AreaConfig(Validated):
 
     _group: ClassVar[str] = "objects"
     _constraints: ClassVar[dict[str, Any]] = {
-        "similarity": POSITIVE, "connectivity": OneOf((4, 8)), "link": Choice(options.LINKS),
+        "similarity": POSITIVE, "link": Choice(options.LINKS),
         "spread": Choice(options.SPREADS), "min_boundary": NON_NEGATIVE,
-        "size_power": NON_NEGATIVE, "grow_stride": POSITIVE_INT, "map_stride": POSITIVE_INT,
+        "size_power": NON_NEGATIVE, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
         "solidity_size": Interval(0, 0.5, open_lo=True),
-        "select": Choice(options.SELECTIONS), "max_areas": POSITIVE_INT, "keep_ratio": FRACTION,
+        "select": Choice(options.SELECTIONS), "max_areas": POSITIVE_INT,
         "keep_budget": Interval(0, 1, open_lo=True),
         "fail_safe": BOOL,
     }
 
     similarity: float = 0.05
-    connectivity: int = 4
     link: str = "image"
     spread: str = "robust"
     min_boundary: float = 0.1
     size_power: float = 0.25
-    grow_stride: int = 2
     map_stride: int = 2
     box_coverage: float = 0.99
     box_quantile: float = 0.001
@@ -165,6 +154,5 @@ class AreaConfig(Validated):
     solidity_size: float = 0.02
     select: str = "salient"
     max_areas: int = 4
-    keep_ratio: float = 0.2
     keep_budget: float = 0.3
     fail_safe: bool = True

@@ -9,7 +9,7 @@ from here, or a test checks that its registry matches), so validating a config i
 from __future__ import annotations
 
 __all__ = ["D_MODES", "DECAYS", "GROUND_RULES", "INITS", "LINKS", "METHODS", "MODES", "NEIGHBORHOODS", "NORMALIZATIONS", "ORDERS",
-           "SELECTIONS", "SPREADS", "TOPOLOGIES", "register_method"]
+           "SELECTIONS", "SPREADS", "SYNTH_FAMILIES", "TOPOLOGIES", "register_method"]
 
 # somtorch.core
 MODES = ("online", "batch", "minibatch")  # SOM.fit's update rules
@@ -22,11 +22,13 @@ NEIGHBORHOODS = ("gaussian", "bubble", "mexican_hat", "triangle")  # keys of cor
 NORMALIZATIONS = ("image", "minmax", "none")
 D_MODES = ("raw", "plane_residual")  # FeatureConfig.d_mode (applied by somtorch.pipeline)
 # somtorch.tasks.ground
-GROUND_RULES = ("position", "support", "either")
+GROUND_RULES = ("none", "position", "support", "either")
 # somtorch.tasks.objects
 SELECTIONS = ("nearest", "salient", "all")
 LINKS = ("grid", "image", "both")
 SPREADS = ("range", "robust")
+# somtorch.synth: the generator's scene families (keys of somtorch.synth.FAMILIES, in that order)
+SYNTH_FAMILIES = ("stairs", "garden", "road", "room", "tabletop", "hands", "fence", "clutter", "floor")
 # somtorch.segmenters: name -> deterministic (one run whatever ``ensemble`` says)
 METHODS: dict[str, bool] = {"som": False, "minisom": False, "kmeans": False, "slic": True, "felzenszwalb": True}
 

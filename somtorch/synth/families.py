@@ -2,8 +2,8 @@
 
 A family function ``fn(b, seed) -> Pose`` adds primitives to the :class:`Builder` ``b`` (every
 random choice from ``b.rng``) and returns the left camera's pose. ``seed`` is the frame's seed,
-used only to stratify the camera pitch of ``tabletop`` and ``room`` over 0°-90° (golden-ratio
-sequence), so that any run of consecutive seeds covers horizontal to straight-down views.
+used only to stratify the camera pitch of ``tabletop`` and ``room`` over 0°-90° and of ``floor``
+over 55°-90° (golden-ratio sequence), so that any run of consecutive seeds covers the range.
 Forward-looking families draw the pitch in 0°-25° down.
 """
 
@@ -248,6 +248,29 @@ def tabletop(b: Builder, seed: int) -> Pose:
     return pose
 
 
+def floor(b: Builder, seed: int) -> Pose:
+    """Things lying on a floor seen from above (55°-90° down, 0.5-1.6 m high: a robot's or a hand-held
+    camera looking at the floor): the floor fills the view, one to four objects of 2-20 % of it."""
+    r = b.rng
+    b.ground(b.material(r.choice(["wood", "ground"]), stripes=0.2))
+    pitch = 55.0 + 35.0 * ((seed * _GOLDEN + r.uniform(0, 0.04)) % 1.0)
+    p, h = math.radians(pitch), r.uniform(0.5, 1.6)
+    dist = h / math.sin(p)  # along the axis to the floor
+    fy = 2.0
+    reach = dist * min(b.camera.width, b.camera.height) / (2 * b.camera.focal_px)
+    n = int(r.integers(1, 5))
+    sizes = list(reach * r.uniform(0.35, 0.8, n))
+    for (x, y), s in zip(b.scatter(n, [s * 0.6 for s in sizes], (-reach * 1.2, reach * 1.2),
+                                   (fy - reach * 0.7, fy + reach * 0.7)), sizes):
+        if r.uniform() < 0.3:  # a flat thing: a parcel, a bag, a folded garment
+            o = b.new_object("parcel")
+            b.box_on(x, y, 0.0, (s, s * r.uniform(0.4, 1.0), s * r.uniform(0.1, 0.35)), o,
+                     b.material("object"), r.uniform(-math.pi, math.pi))
+        else:
+            parts.small_object(b, x, y, 0.0, s, r.uniform(-math.pi, math.pi))
+    return Pose(0.0, fy - dist * math.cos(p), h, pitch, r.uniform(-8, 8))
+
+
 def hands(b: Builder, seed: int) -> Pose:
     r = b.rng
     b.ground(b.material("ground"))
@@ -297,5 +320,6 @@ FAMILIES: dict[str, Family] = {
     "hands": Family(hands, 0.3, 1.2, 0.6),
     "fence": Family(fence, 1.5, 12.0, 5.0),
     "clutter": Family(clutter, 1.0, 10.0, 4.0),
+    "floor": Family(floor, 0.4, 2.0, 1.0),
 }
 """The families by name."""

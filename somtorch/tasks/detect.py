@@ -110,9 +110,8 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with
     segments of an area kept before it), its box refined (:func:`refine_box`), and kept if its :func:`box_purity` reaches ``cfg.min_purity`` and its
     segments' solidity reaches ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a
-    dense map's standard). After the first kept area, a further one must score at least
-    ``cfg.keep_ratio ×`` the best candidate's rank score and, with ``cfg.keep_budget < 1``, leave
-    the union of the kept boxes within that share of the valid pixels (else it is skipped and the
+    dense map's standard). After the first kept area, a further one must, with
+    ``cfg.keep_budget < 1``, leave the union of the kept boxes within that share of the valid pixels (else it is skipped and the
     next candidate tried). At most ``cfg.max_areas`` are kept, out of the ``cfg.max_areas``
     best-ranked candidates (a failed check leaves room for the next of them). If none passed: the
     best-ranked candidate, or nothing with ``cfg.fail_safe`` (the caller keeps the whole map).
@@ -125,25 +124,21 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     Shape:
         ``labels`` ``(H, W)``.
     """
-    areas_max = cfg.max_areas if cfg.keep_ratio < 1 else 1  # a ratio of 1 keeps only the best
-    ranked = select_areas(areas, stats, replace(cfg, max_areas=areas_max))
+    ranked = select_areas(areas, stats, cfg)
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first = [], None
-    lab_s = labels[::cfg.grow_stride, ::cfg.grow_stride]  # as in the box refinement
-    square = _square(labels.shape, cfg.solidity_size, cfg.grow_stride)
+    square = _square(labels.shape, cfg.solidity_size, 1)
     best = max((rank_score(a, cfg) for a in ranked), default=0.0)
     for cand in ranked:
         if bool(taken[torch.tensor(cand.neurons)].any()):
             continue
         confidence = rank_score(cand, cfg) / best if best > 0 else 1.0
-        if kept and confidence < cfg.keep_ratio:
-            break
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
                                 exclude=taken)[0]
         done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
-                          stride=cfg.grow_stride, ground_residual=ctx.ground_residual,
+                          ground_residual=ctx.ground_residual,
                           clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)
-        own = label_mask(lab_s, done.neurons)
+        own = label_mask(labels, done.neurons)
         solid = _opened_share(own, square)  # in [0, 1]: the opening keeps a subset of the pixels
         done = replace(done, purity=box_purity(done, labels, ctx.integral), solidity=solid,
                        solidity_rel=solid / ctx.solidity, confidence=confidence)
@@ -157,7 +152,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
                     continue  # it would not fit the reduction budget; a smaller one may
             kept.append(done)
             taken[torch.tensor(done.neurons)] = True
-            if len(kept) == areas_max:
+            if len(kept) == cfg.max_areas:
                 break
     if not kept and first is not None and not cfg.fail_safe:
         kept = [first]

@@ -67,8 +67,13 @@ class GroundPlane:
                 "support": self.support}
 
 
-def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundConfig | None = None) -> GroundPlane | None:
+def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundConfig | None = None, *,
+                     seed: int = 0) -> GroundPlane | None:
     """Find the ground plane of a disparity map, or None if there is none (see the module docstring).
+
+    ``seed``: RANSAC's own seed. The pipeline keeps 0: the plane is a property of the map, the
+    same for every SOM seed and every member of an ensemble; tests vary it to check that the
+    plane found does not depend on the draw.
 
     Shape:
         ``disparity``, ``valid``: ``(H, W)``.
@@ -76,7 +81,7 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     cfg = cfg or GroundConfig()
     check_tensor("disparity", disparity, ndim=2, floating=True)
     check_tensor("valid", valid, ndim=2, dtype=torch.bool)
-    if not cfg.enabled:
+    if cfg.rule == "none":
         return None
     h, w = disparity.shape
     ok = valid & torch.isfinite(disparity)
@@ -85,13 +90,13 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
         return None
     dv = disparity[ok].double()
     if dv.numel() > 20_000:
-        dv = dv[torch.randint(dv.numel(), (20_000,), generator=torch.Generator().manual_seed(cfg.seed))]
+        dv = dv[torch.randint(dv.numel(), (20_000,), generator=torch.Generator().manual_seed(seed))]
     m = dv.numel()
     lo_q = dv.kthvalue(max(1, int(0.01 * m))).values
     hi_q = dv.kthvalue(max(1, int(0.99 * m))).values
     span = max(float(hi_q - lo_q), 1e-9)  # robust disparity range (outliers of SGBM maps ignored)
     tol = max(cfg.tol_px, cfg.tol_frac * span)
-    g = torch.Generator().manual_seed(cfg.seed)
+    g = torch.Generator().manual_seed(seed)
     lower = ok.clone()
     if cfg.rule != "support":  # where a forward camera sees its floor
         lower[: h // 2] = False
@@ -126,14 +131,10 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     pa = allyx[torch.randint(allyx.shape[0], (min(cfg.sample, allyx.shape[0]),), generator=g)]
     q = torch.stack([pa[:, 1].double(), pa[:, 0].double(), disparity[pa[:, 0], pa[:, 1]].double()], 1)
     score = score.masked_fill(~_passes_sampled(coef, q, tol, h, oriented, cfg), -1)
-    order = torch.argsort(score, descending=True, stable=True)
-    for i in order[:cfg.tries].tolist():
-        if int(score[i]) < 0:
-            break
-        plane = _verified(coef[i], pts, disparity, ok, n_valid, tol, min_b, cfg)
-        if plane is not None:
-            return plane
-    return None
+    best = int(torch.argmax(score))  # the first of the best: argmax returns the lowest index of ties
+    if int(score[best]) < 0:
+        return None
+    return _verified(coef[best], pts, disparity, ok, n_valid, tol, min_b, cfg)
 
 
 def _predict(coef: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:

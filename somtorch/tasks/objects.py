@@ -254,9 +254,8 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
     ref = ref_disparity.double().cpu()
     link = cfg.link if grid_d2 is not None else "image"
     tau = cfg.similarity * stats.spread(cfg.spread)
-    reach = 1.0 + 1e-6 if cfg.connectivity == 4 else 2.0 + 1e-6
     if grid_d2 is not None:
-        near = grid_d2.cpu() <= reach
+        near = grid_d2.cpu() <= 1.0 + 1e-6  # adjacent on the grid: one step along a row or a column
     if link != "grid":
         touch = _touching(stats, cfg.min_boundary)
         near = touch if link == "image" else near | touch

@@ -84,7 +84,7 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
 
 
 def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.box_coverage,
-               quantile: float = _D.box_quantile, stride: int = _D.grow_stride, ground_residual: torch.Tensor | None = None,
+               quantile: float = _D.box_quantile, stride: int = 1, ground_residual: torch.Tensor | None = None,
                clutter_band: float = 0.0, drop_specks: bool = _D.drop_specks) -> ObjectArea:
     """The box of the object inside a kept area, without the parts of its segments that are not it.
 
@@ -166,7 +166,7 @@ def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Ten
     return own / max(n_valid, 1)
 
 
-def solidity(mask: torch.Tensor, *, size: float = _D.solidity_size, stride: int = _D.grow_stride) -> float:
+def solidity(mask: torch.Tensor, *, size: float = _D.solidity_size, stride: int = 1) -> float:
     """Share of the pixels of ``mask`` that survive a morphological opening with a square of side
     ``size ×`` the shorter image side (on every ``stride``-th pixel; the nearest odd number of
     samples, at least 3): about 1 for a solid region, near 0 for scattered speckles and 1–2 px
@@ -198,4 +198,4 @@ def _opened_share(sampled: torch.Tensor, k: int) -> float:
 def map_solidity(labels: torch.Tensor, cfg: AreaConfig) -> float:
     """:func:`solidity` of all the segmented pixels (``labels >= 0``), the reference of
     ``cfg.min_solidity``; the same for every member of an ensemble (they segment the same pixels)."""
-    return max(solidity(labels >= 0, size=cfg.solidity_size, stride=cfg.grow_stride), 1e-9)
+    return max(solidity(labels >= 0, size=cfg.solidity_size), 1e-9)

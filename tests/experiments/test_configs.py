@@ -120,7 +120,7 @@ def test_stereo_pair_without_a_left_image_is_missing():
     ("som.rowz=3", "rowz"),
     ("ensemble=two", "ensemble"),
     ("objects.select=bogus", "bogus"),
-    ("objects.connectivity=6", "connectivity"),
+    ("objects.link=diagonal", "diagonal"),
     ("objects.keep_budget=2.0", "keep_budget"),
 ])
 def test_typos_wrong_types_and_bad_values_fail_at_composition(override, names):

@@ -13,7 +13,7 @@ from somtorch.synth.cameras import CAMERAS, Pose
 from somtorch.synth.frame import _to_uint8, draw_layout
 from somtorch.synth.render import cast
 
-CAMERA_OF = dict(zip(FAMILIES, ["oakd", "kitti", "middlebury", "oakd", "kitti", "middlebury", "oakd", "kitti"]))
+CAMERA_OF = {f: ("oakd", "kitti", "middlebury")[i % 3] for i, f in enumerate(FAMILIES)}
 
 
 def test_sgbm_on_a_textured_render_is_accurate_where_textured_and_unoccluded(builder, render, textured):
@@ -37,6 +37,14 @@ def test_sgbm_on_a_textured_render_is_accurate_where_textured_and_unoccluded(bui
     err = (d - gt).abs()[use]
     assert float(err.median()) < 1.0, float(err.median())
     assert float(err.median()) < 0.5  # in practice ~0.2 px
+
+
+def test_the_option_table_names_every_family_in_order():
+    from experiments.synth_config import SynthConfig
+    from somtorch.config.options import SYNTH_FAMILIES
+
+    assert tuple(FAMILIES) == SYNTH_FAMILIES
+    assert SynthConfig().families == list(FAMILIES)  # the generator's default: every family
 
 
 def test_generate_frame_is_deterministic():
@@ -80,6 +88,16 @@ def test_pitch_of_tabletop_and_room_spans_horizontal_to_straight_down(family):
     pitches = [draw_layout(family, s, CAMERAS["oakd"])[0].pose.pitch_deg for s in range(13)]
     assert min(pitches) < 8 and max(pitches) > 82
     assert all(0 <= p <= 90 for p in pitches)
+
+
+def test_floor_looks_down_from_55_to_90_degrees_onto_objects_on_the_floor():
+    pitches = []
+    for s in range(13):
+        layout = draw_layout("floor", s, CAMERAS["oakd"])[0]
+        pitches.append(layout.pose.pitch_deg)
+        assert 1 <= len(layout.names) <= 4  # one to four things lying on the floor
+    assert min(pitches) < 60 and max(pitches) > 85
+    assert all(55 <= p <= 90 for p in pitches)
 
 
 def test_forward_families_look_forward():

@@ -72,7 +72,7 @@ def test_a_fronto_parallel_wall_and_a_disabled_search_give_no_plane():
     # the default rule (either) takes it, holding everything, with nothing standing on it
     g = fit_ground_plane(torch.full((H, W), 20.0), valid, GroundConfig())
     assert g is not None and g.support and g.inlier_frac == 1.0
-    assert fit_ground_plane(_floor(), valid, GroundConfig(enabled=False)) is None
+    assert fit_ground_plane(_floor(), valid, GroundConfig(rule="none")) is None
 
 
 def test_the_best_plane_that_passes_the_tests_is_found_not_the_best_plane_refused():
@@ -97,7 +97,7 @@ def test_a_real_floor_near_a_threshold_is_found_whatever_the_ransac_seed(shared_
     from somtorch.disparity.loading import load_scene
 
     scene = load_scene(shared_data / "oakd_stereodemo" / "toy")
-    found = [fit_ground_plane(scene.disparity, scene.valid, GroundConfig(seed=s)) for s in range(6)]
+    found = [fit_ground_plane(scene.disparity, scene.valid, seed=s) for s in range(6)]
     assert all(g is not None for g in found)
     assert max(g.inlier_frac for g in found) - min(g.inlier_frac for g in found) < 0.03
     assert all(0.1 < g.b < 0.15 for g in found)  # the same floor (0.125 px per row)

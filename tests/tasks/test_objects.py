@@ -78,15 +78,15 @@ def test_similarity_threshold_is_a_fraction_of_the_disparity_range():
     assert set(near(0.05).neurons) == {0}  # 3 ≥ 0.05 · 40
 
 
-def test_connectivity_8_joins_diagonal_neighbours_and_4_does_not():
+def test_the_grid_link_joins_row_and_column_neighbours_not_diagonal_ones():
     ref = torch.full((ROWS * COLS,), 10.0)
     ref[0] = ref[COLS + 1] = 50.0  # (0, 0) and (1, 1): diagonal neighbours
-    areas4, _ = _areas(ref, AreaConfig(connectivity=4, **PAPER))
-    areas8, _ = _areas(ref, AreaConfig(connectivity=8, **PAPER))
-    assert {frozenset({0}), frozenset({COLS + 1})} <= _neuron_sets(areas4)
-    assert frozenset({0, COLS + 1}) in _neuron_sets(areas8)
-    # the 10-background is one area either way
-    assert len(areas8) == 2 and len(areas4) == 3
+    areas, _ = _areas(ref, AreaConfig(**PAPER))
+    assert {frozenset({0}), frozenset({COLS + 1})} <= _neuron_sets(areas)
+    ref[1] = 50.0  # (0, 1) is a row neighbour of (0, 0) and a column neighbour of (1, 1)
+    areas, _ = _areas(ref, AreaConfig(**PAPER))
+    assert frozenset({0, 1, COLS + 1}) in _neuron_sets(areas)
+    assert len(areas) == 2  # and the 10-background is one area
 
 
 def test_neurons_without_pixels_form_no_area():
@@ -284,7 +284,7 @@ def test_neuron_stats_rejects_bad_inputs():
 
 @pytest.mark.parametrize("kwargs", [
     {"similarity": 0.0}, {"similarity": -0.1}, {"similarity": float("nan")},
-    {"connectivity": 6}, {"select": "bogus"}, {"max_areas": 0},
+    {"link": "diagonal"}, {"select": "bogus"}, {"max_areas": 0},
     {"size_power": -0.01},
     {"box_quantile": 0.5}, {"box_quantile": -0.01}, {"ground_clutter": -1.0}, {"merge": -0.5},
     {"merge": float("nan")}, {"min_purity": 1.5}, {"min_purity": -0.1},

@@ -168,8 +168,8 @@ def test_kept_areas_skips_a_speckle_area_whose_box_is_mostly_other_pixels():
     assert not found.no_object and [(a.neurons, a.box) for a in found.kept] == [(a.neurons, a.box) for a in kept]
 
 
-def test_kept_areas_keeps_further_areas_by_their_score_relative_to_the_best():
-    # two compact objects of similar contrast and size: both kept with max_areas=2 and a low ratio
+def test_kept_areas_keeps_further_areas_up_to_max_areas_with_their_relative_score():
+    # two compact objects of similar contrast and size: both kept with max_areas=2
     h, w = 120, 160
     disp = torch.full((h, w), 10.0)
     labels = torch.zeros(h, w, dtype=torch.long)
@@ -181,16 +181,13 @@ def test_kept_areas_keeps_further_areas_by_their_score_relative_to_the_best():
     one = kept_areas(areas, stats, labels, AreaConfig(max_areas=1), ctx)
     assert [a.neurons for a in one] == [[1]]
     assert [a.neurons for a in kept_areas(areas, stats, labels, AreaConfig(), ctx)] == [[1], [2]]  # the default
-    two = kept_areas(areas, stats, labels, AreaConfig(max_areas=2, keep_ratio=0.5), ctx)
+    two = kept_areas(areas, stats, labels, AreaConfig(max_areas=2), ctx)
     assert [a.neurons for a in two] == [[1], [2]] and [a.rank for a in two] == [0, 1]
-    assert two[0].confidence == 1.0 and 0.5 <= two[1].confidence < 1.0
-    # a ratio above the second's relative score keeps one
-    strict = kept_areas(areas, stats, labels, AreaConfig(max_areas=2, keep_ratio=0.99), ctx)
-    assert [a.neurons for a in strict] == [[1]]
+    assert two[0].confidence == 1.0 and 0.5 <= two[1].confidence < 1.0  # its score over the best one's
 
 
 def test_solidity_is_one_for_a_solid_region_and_zero_for_streaks_and_speckles():
-    h, w = 200, 300  # square side: 2 % of 200 = 4 px = 2 samples at stride 2, rounded up to 3 (odd)
+    h, w = 200, 300  # square side: 2 % of 200 = 4 px, rounded up to 5 (odd)
     block = torch.zeros(h, w, dtype=torch.bool)
     block[40:100, 50:150] = True
     assert solidity(block) == 1.0
@@ -202,9 +199,10 @@ def test_solidity_is_one_for_a_solid_region_and_zero_for_streaks_and_speckles():
     assert solidity(speckles) == 0.0
     assert solidity(torch.zeros(h, w, dtype=torch.bool)) == 0.0
     both = block | streaks
-    sampled = both[::2, ::2]
-    assert solidity(both) == pytest.approx(float(block[::2, ::2].sum()) / float(sampled.sum()))
-    # a larger square (10 % of 200 = 20 px: 11 samples) does not fit into an 18 px high bar
+    assert solidity(both) == pytest.approx(float(block.sum()) / float(both.sum()))
+    sampled = both[::2, ::2]  # on every 2nd pixel: the square counted in samples (2, rounded up to 3)
+    assert solidity(both, stride=2) == pytest.approx(float(block[::2, ::2].sum()) / float(sampled.sum()))
+    # a larger square (10 % of 200 = 20 px, 21) does not fit into an 18 px high bar
     bar = torch.zeros(h, w, dtype=torch.bool)
     bar[40:58, 20:280] = True
     assert solidity(bar) == 1.0 and solidity(bar, size=0.1) == 0.0
