@@ -135,10 +135,10 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         confidence = rank_score(cand, cfg) / best if best > 0 else 1.0
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
                                 exclude=taken)[0]
+        own = label_mask(labels, joined.neurons)  # refine_box moves the box, not the neurons
         done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
-                          ground_residual=ctx.ground_residual,
-                          clutter_band=ctx.clutter_band, drop_specks=cfg.drop_specks)
-        own = label_mask(labels, done.neurons)
+                          ground_residual=ctx.ground_residual, clutter_band=ctx.clutter_band,
+                          drop_specks=cfg.drop_specks, mask=own)
         solid = _opened_share(own, square)  # in [0, 1]: the opening keeps a subset of the pixels
         done = replace(done, purity=box_purity(done, labels, ctx.integral), solidity=solid,
                        solidity_rel=solid / ctx.solidity, confidence=confidence)

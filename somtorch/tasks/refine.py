@@ -85,7 +85,8 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
 
 def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.box_coverage,
                quantile: float = _D.box_quantile, stride: int = 1, ground_residual: torch.Tensor | None = None,
-               clutter_band: float = 0.0, drop_specks: bool = _D.drop_specks) -> ObjectArea:
+               clutter_band: float = 0.0, drop_specks: bool = _D.drop_specks,
+               mask: torch.Tensor | None = None) -> ObjectArea:
     """The box of the object inside a kept area, without the parts of its segments that are not it.
 
     The area's pixels are split into image-connected pieces (8-connectivity, on every ``stride``-th
@@ -105,10 +106,11 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
        1–2 px wide protrusion (an antenna, a cable, an SGBM streak) does not move an edge
        (0 = the full extent).
 
-    Every step keeps the area unchanged if it would drop all pixels.
+    Every step keeps the area unchanged if it would drop all pixels. ``mask``: the area's pixels,
+    ``label_mask(labels, area.neurons)``, if the caller has it.
 
     Shape:
-        ``labels`` ``(H, W)`` long; ``ground_residual`` ``(H, W)`` or None (no ground plane).
+        ``labels`` ``(H, W)`` long; ``ground_residual``, ``mask`` ``(H, W)`` or None.
     """
     import cv2
     import numpy as np
@@ -116,7 +118,9 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
     if coverage >= 1.0 and quantile <= 0.0 and not drop_specks and (ground_residual is None or clutter_band <= 0):
         return area
     s = max(1, int(stride))
-    mask = np.isin(labels[::s, ::s].cpu().numpy(), np.asarray(area.neurons))
+    if mask is None:
+        mask = label_mask(labels, area.neurons)
+    mask = mask[::s, ::s].cpu().numpy()
     n, comp, st, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     if n <= 1:
         return area
