@@ -117,8 +117,16 @@ def _labelled_frames(name: str, real: bool, body: dict[str, Any]) -> list[FrameS
 
 
 def _synthetic_datasets(body: dict[str, Any]) -> list[DatasetSpec]:
-    """One dataset per family x camera, seeds 0..seeds-1, each in a GT and an SGBM version."""
-    _check_keys("synthetic", body, {"families", "cameras", "seeds"})
+    """One dataset per family x camera, seeds 0..seeds-1, each in a GT and an SGBM version; the
+    families of ``noisy`` also as their GT with ``noisy.junk`` added (a dense sensor's noise)."""
+    _check_keys("synthetic", body, {"families", "cameras", "seeds", "noisy"})
+    noisy = body.get("noisy") or {}
+    if noisy:
+        from .scenes import check_junk_kind
+
+        _check_keys("synthetic.noisy", noisy, {"families", "junk"})
+
+        check_junk_kind(noisy["junk"])
     out = []
     for fam in body["families"]:
         for cam in body["cameras"]:
@@ -131,6 +139,10 @@ def _synthetic_datasets(body: dict[str, Any]) -> list[DatasetSpec]:
                         name=f"{name}_{seed:02d}" + ("_sgbm" if version == "sgbm" else ""), dataset=name,
                         real=False, folder=folder, disparity="gt" if version == "gt" else "disp_sgbm.pfm",
                         group=f"{name}_{seed:02d}", synthetic=True, camera=cam))
+                if fam in noisy.get("families", ()):
+                    specs.append(FrameSpec(name=f"{name}_{seed:02d}_noisy", dataset=name, real=False,
+                                           folder=folder, junk=noisy["junk"], group=f"{name}_{seed:02d}",
+                                           synthetic=True, camera=cam))
             out.append(DatasetSpec(name, False, tuple(specs)))
     return out
 
@@ -253,4 +265,8 @@ def load_frame(spec: FrameSpec, data_dir: str | Path, corpus: str | Path | None 
     if not folder.is_dir():
         raise FileNotFoundError(f"synthetic frame {spec.name!r}: {missing_corpus([spec], corpus)}")
     scene = load_scene(folder) if spec.disparity == "gt" else load_scene(folder, disparity_file=spec.disparity)
+    if spec.junk:
+        from .scenes import add_junk
+
+        scene = add_junk(scene, spec.junk, seed=sum(map(ord, spec.name)))
     return dataclasses.replace(scene, name=spec.name)

@@ -54,20 +54,22 @@ def _load(spec: Any, data_dir: Path) -> Any:
                              camera=gt.camera, name=spec.name)
 
 
-JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F")
+JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S")
 
 
 def check_junk_kind(kind: str) -> None:
     """Raise ``ValueError`` naming the known kinds unless ``kind`` is one of :data:`JUNK_KINDS`
     (``resample:F`` with F a positive number)."""
-    if kind.startswith("resample:"):
-        try:
-            ok = float(kind.split(":", 1)[1]) > 0
-        except ValueError:
-            ok = False
-        if ok:
-            return
-        raise ValueError(f"junk kind {kind!r}: resample needs a positive factor, e.g. resample:0.5")
+    for prefix, what, example in (("resample:", "a positive factor", "resample:0.5"),
+                                  ("noise:", "a positive standard deviation in px", "noise:0.5")):
+        if kind.startswith(prefix):
+            try:
+                ok = float(kind.split(":", 1)[1]) > 0
+            except ValueError:
+                ok = False
+            if ok:
+                return
+            raise ValueError(f"junk kind {kind!r}: {prefix[:-1]} needs {what}, e.g. {example}")
     if kind not in JUNK_KINDS:
         raise ValueError(f"unknown junk kind {kind!r}: {', '.join(JUNK_KINDS)}")
 
@@ -89,6 +91,14 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
         f = float(kind.split(":", 1)[1])
         out = resize_scene(scene, max(8, round(scene.width * f)), max(8, round(scene.height * f)))
         return dataclasses.replace(out, name=f"{scene.name}+{kind}")
+    if kind.startswith("noise:"):  # a dense sensor's per-pixel noise: Gaussian, on every valid pixel
+        sigma = float(kind.split(":", 1)[1])
+        g = torch.Generator().manual_seed(seed)
+        noise = torch.randn(scene.disparity.shape, generator=g, dtype=scene.disparity.dtype)
+        noisy = scene.disparity + sigma * noise
+        keep = scene.valid & (noisy > 0)  # a disparity pushed to 0 or below is no measurement
+        return dataclasses.replace(scene, disparity=torch.where(keep, noisy, scene.disparity), valid=keep,
+                                   name=f"{scene.name}+{kind}")
     if kind == "flip":  # the mirrored scene (a mirrored world is a valid world; the camera is dropped)
         flip = {f: getattr(scene, f).flip(-1) for f in ("disparity", "valid", "image", "objects")
                 if getattr(scene, f) is not None}

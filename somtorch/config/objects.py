@@ -29,7 +29,11 @@ class GroundConfig(Validated):
         rule: ``"none"``, ``"position"``, ``"support"`` or ``"either"`` (above).
         tol_frac: inlier band half-width as a fraction of the map's disparity range (1st–99th
             percentile) …
-        tol_px: … but at least this many px.
+        tol_px: … but at least this many px …
+        noise_band: … and at least this many times the map's per-pixel disparity noise
+            (:func:`~somtorch.tasks.ground.noise_sigma`: ≤ 0.1 px on every stereo and GT map of the
+            corpus, so the band there is the two above; a dense sensor's floor with 0.5 px of noise
+            left a third of its pixels as speckle outside a 0.5 px band). 0 = off.
         min_inlier_frac: a plane needs this share of the valid pixels.
         min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
             of the disparity range: a floor spans it, from its horizon to the nearest thing in view;
@@ -56,7 +60,7 @@ class GroundConfig(Validated):
         "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_below_frac": FRACTION,
         "iterations": POSITIVE_INT, "sample": POSITIVE_INT,
-        "support_frac": Interval(0, 1, open_lo=True),
+        "support_frac": Interval(0, 1, open_lo=True), "noise_band": NON_NEGATIVE,
         "max_protrusion_frac": FRACTION,
     }
 
@@ -70,6 +74,7 @@ class GroundConfig(Validated):
     sample: int = 5000
     support_frac: float = 0.6
     max_protrusion_frac: float = 0.2
+    noise_band: float = 2.0
 
 
 # ------------------------------------------------------------------------------ step 1c: objects

@@ -254,6 +254,30 @@ def test_flip_junk_mirrors_every_layer():
         add_junk(scene, "rotate")
 
 
+def test_noise_junk_adds_seeded_gaussian_noise_to_every_valid_pixel():
+    import torch
+
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()
+    out = add_junk(scene, "noise:0.5", seed=3)
+    step = (out.disparity - scene.disparity)[out.valid]
+    assert abs(float(step.std()) - 0.5) < 0.05 and abs(float(step.mean())) < 0.05
+    assert torch.equal(out.disparity, add_junk(scene, "noise:0.5", seed=3).disparity)  # seeded
+    assert not torch.equal(out.disparity, add_junk(scene, "noise:0.5", seed=4).disparity)
+    assert bool((out.disparity[out.valid] > 0).all()) and not bool((out.valid & ~scene.valid).any())
+    assert torch.equal(out.objects, scene.objects) and out.name == "toy+noise:0.5"
+
+
+def test_the_noisy_floor_frames_are_the_gt_frames_with_noise_in_their_scene_group():
+    noisy = [f for f in frames(datasets=["synth_floor_oakd"]) if f.name.endswith("_noisy")]
+    assert len(noisy) == 6 and all(f.junk == "noise:0.5" and f.disparity == "gt" for f in noisy)
+    gt = {f.group: f.folder for f in frames(datasets=["synth_floor_oakd"])
+          if f.disparity == "gt" and not f.junk}
+    assert all(gt[f.group] == f.folder for f in noisy)  # the same scene, resampled together
+    assert not any(f.name.endswith("_noisy") for f in frames(datasets=["synth_stairs_oakd"]))
+
+
 def test_an_unknown_baseline_fails_before_any_work(tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "experiments.validate", f"hydra.run.dir={tmp_path}", "ensemble=2",
@@ -267,10 +291,10 @@ def test_an_unknown_baseline_fails_before_any_work(tmp_path):
 def test_an_unknown_transform_fails_before_any_work(tmp_path):
     from experiments.scenes import check_junk_kind
 
-    for ok in ("flip", "pole", "resample:0.5"):
+    for ok in ("flip", "pole", "resample:0.5", "noise:0.5"):
         check_junk_kind(ok)
     for bad, msg in (("rotate", "unknown junk kind"), ("resample:-2", "positive factor"),
-                     ("resample:x", "positive factor")):
+                     ("resample:x", "positive factor"), ("noise:0", "positive standard deviation")):
         with pytest.raises(ValueError, match=msg):
             check_junk_kind(bad)
     proc = subprocess.run(

@@ -117,3 +117,36 @@ def test_the_plane_has_the_same_bits_at_one_and_two_threads():
     finally:
         torch.set_num_threads(before)
     assert planes[0][:3] == planes[1][:3] and torch.equal(planes[0][3], planes[1][3])
+
+
+def test_noise_sigma_measures_per_pixel_noise_and_ignores_gradients_and_edges():
+    from somtorch.tasks.ground import noise_sigma
+
+    g = torch.Generator().manual_seed(0)
+    d = _floor() + 0.3 * torch.arange(W, dtype=torch.float32)[None, :]  # tilted in x too
+    d[50:100, 60:100] += 20.0  # a box: depth edges
+    valid = torch.ones(H, W, dtype=torch.bool)
+    assert noise_sigma(d, valid) < 0.01  # a noise-free map
+    noisy = d + 0.5 * torch.randn(H, W, generator=g)
+    assert abs(noise_sigma(noisy, valid) - 0.5) < 0.05
+    stripes = valid.clone()
+    stripes[:, ::2] = False  # no two horizontal neighbours valid: nothing to measure
+    assert noise_sigma(noisy, stripes) == 0.0
+
+
+def test_the_band_widens_with_the_noise_of_a_dense_floor():
+    """A floor with 0.5 px of per-pixel noise (a dense sensor) and a 1 px band: with the band at
+    least twice the noise, nearly all of it is ground; without, a third of it was left as speckle."""
+    g = torch.Generator().manual_seed(1)
+    d = 40.0 + 0.05 * torch.arange(H, dtype=torch.float32)[:, None].expand(H, W)  # from above: a small range
+    box = torch.zeros(H, W, dtype=torch.bool)
+    box[40:70, 60:100] = True
+    d = torch.where(box, d + 8.0, d) + 0.5 * torch.randn(H, W, generator=g)
+    valid = torch.ones(H, W, dtype=torch.bool)
+    narrow = fit_ground_plane(d, valid, GroundConfig(rule="support", noise_band=0.0))
+    wide = fit_ground_plane(d, valid, GroundConfig(rule="support"))
+    floor = ~box
+    assert narrow is not None and wide is not None
+    assert float(narrow.mask[floor].float().mean()) < 0.75
+    assert float(wide.mask[floor].float().mean()) > 0.94 and not bool(wide.mask[box].any())
+    assert abs(wide.tol - 2 * 0.5) < 0.1  # noise_band × the measured noise
