@@ -108,11 +108,12 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     """Select, join, refine and check the candidates in rank order.
 
     Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with
-    segments of an area kept before it), its box refined (:func:`refine_box`), and kept if its :func:`box_purity` reaches ``cfg.min_purity`` and its
-    segments' solidity reaches ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a
-    dense map's standard). After the first kept area, a further one must, with
-    ``cfg.keep_budget < 1``, leave the union of the kept boxes within that share of the valid pixels (else it is skipped and the
-    next candidate tried). At most ``cfg.max_areas`` are kept, out of the ``cfg.max_areas``
+    segments of an area kept before it), its box refined (:func:`refine_box`), and kept if its
+    :func:`box_purity` reaches ``cfg.min_purity`` and its segments' solidity reaches
+    ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a dense map's standard). After
+    the first kept area, a further one must, with ``cfg.keep_budget < 1``, leave the union of the
+    kept boxes within that share of the valid pixels (else it is skipped and the next candidate
+    tried). At most ``cfg.max_areas`` are kept, out of the ``cfg.max_areas``
     best-ranked candidates (a failed check leaves room for the next of them). If none passed: the
     best-ranked candidate, or nothing with ``cfg.fail_safe`` (the caller keeps the whole map).
 

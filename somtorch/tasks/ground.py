@@ -96,7 +96,10 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     lo_q = dv.kthvalue(max(1, int(0.01 * m))).values
     hi_q = dv.kthvalue(max(1, int(0.99 * m))).values
     span = max(float(hi_q - lo_q), 1e-9)  # robust disparity range (outliers of SGBM maps ignored)
-    tol = max(cfg.tol_px, cfg.tol_frac * span, cfg.noise_band * noise_sigma(disparity, ok))
+    noise = cfg.noise_band * noise_sigma(disparity, ok) if cfg.noise_band > 0 else 0.0
+    if noise > 0.5 * span:  # neighbours differ as much as the whole map: noise, no surface to fit
+        noise = 0.0  # (a band of half the range would hold most pixels of any map)
+    tol = max(cfg.tol_px, cfg.tol_frac * span, noise)
     g = torch.Generator().manual_seed(seed)
     lower = ok.clone()
     if cfg.rule != "support":  # where a forward camera sees its floor

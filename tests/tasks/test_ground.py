@@ -150,3 +150,17 @@ def test_the_band_widens_with_the_noise_of_a_dense_floor():
     assert float(narrow.mask[floor].float().mean()) < 0.75
     assert float(wide.mask[floor].float().mean()) > 0.94 and not bool(wide.mask[box].any())
     assert abs(wide.tol - 2 * 0.5) < 0.1  # noise_band × the measured noise
+
+
+def test_a_map_of_pure_noise_is_not_cut_by_a_band_as_wide_as_its_noise():
+    """Uniform noise over 1-60 px: neighbours differ as much as the whole map (measured noise ~17 px),
+    so the noise term is dropped; a 34 px band would have held most pixels and cut them all."""
+    from somtorch.tasks.ground import noise_sigma
+
+    g = torch.Generator().manual_seed(2)
+    d = 1.0 + 59.0 * torch.rand(H, W, generator=g)
+    valid = torch.ones(H, W, dtype=torch.bool)
+    assert noise_sigma(d, valid) > 10
+    for rule in ("support", "either"):
+        plane = fit_ground_plane(d, valid, GroundConfig(rule=rule))
+        assert plane is None or (plane.tol < 2.0 and plane.inlier_frac < 0.2), (rule, plane)
