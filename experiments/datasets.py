@@ -125,7 +125,6 @@ def _synthetic_datasets(body: dict[str, Any]) -> list[DatasetSpec]:
         from .scenes import check_junk_kind
 
         _check_keys("synthetic.noisy", noisy, {"families", "junk"})
-
         check_junk_kind(noisy["junk"])
     out = []
     for fam in body["families"]:

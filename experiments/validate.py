@@ -308,8 +308,8 @@ def main(dcfg: DictConfig) -> int:
     write_staged(out, {"validate.md": to_markdown(report).encode(), "validate.json": _nulls_for_nan(report)})
     m = report["summary"]["macro_real"]
     if not any(r["real"] for r in report["rows"]):
-        log.warning("no real dataset among the frames: the real macro is undefined (null in validate.json) and "
-                    "the protocol adopts nothing; tables in %s", out / "validate.md")
+        log.warning("no real dataset among the frames: the real macro is undefined (null in validate.json) "
+                    "and the protocol adopts nothing; tables in %s", out / "validate.md")
         return 0
     log.info("real macro useful-hit rate: default %.1f %%, in-sample %.1f %%, left-out %.1f %% (all-objects "
              "%.1f / %.1f / %.1f %%); tables in %s", *(100 * m[f"{p}_{r}"] for r in ("useful_hits", "all_objects_hits")

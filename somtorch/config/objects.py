@@ -16,10 +16,11 @@ class GroundConfig(Validated):
     """The support surface (floor, road, table top), found by RANSAC in (x, y, d) and verified
     before removal.
 
-    Verification (``rule``): ``"none"`` — no ground handling (the paper's pipeline); ``"position"`` — where a forward camera sees its floor (``min_slope_frac``,
-    tilt in x ≤ tilt in y; RANSAC on the lower image half); ``"support"`` — by what
-    the plane supports, at any camera pitch (``support_frac`` of the pixels on it, the pixels above
-    it in compact protrusions of at most ``max_protrusion_frac``; RANSAC on the whole map);
+    Verification (``rule``): ``"none"`` — no ground handling (the paper's pipeline);
+    ``"position"`` — where a forward camera sees its floor (``min_slope_frac``, tilt in x ≤ tilt in
+    y; RANSAC on the lower image half); ``"support"`` — by what the plane supports, at any camera
+    pitch (``support_frac`` of the pixels on it, the pixels above it in compact protrusions of at
+    most ``max_protrusion_frac``; RANSAC on the whole map);
     ``"either"`` — a plane passing either (RANSAC on the lower half). Every rule needs
     ``min_inlier_frac``; the position rule also ``max_below_frac`` (nothing substantial behind the
     plane), which a support-verified plane need not pass: a table top holding most of the view
@@ -33,7 +34,8 @@ class GroundConfig(Validated):
         noise_band: … and at least this many times the map's per-pixel disparity noise
             (:func:`~somtorch.tasks.ground.noise_sigma`: ≤ 0.1 px on every stereo and GT map of the
             corpus, so the band there is the two above; a dense sensor's floor with 0.5 px of noise
-            left a third of its pixels as speckle outside a 0.5 px band). 0 = off.
+            left a third of its pixels as speckle outside a 0.5 px band); dropped where it exceeds
+            half the map's 1–99 % disparity range (a map of noise, no surface). 0 = off.
         min_inlier_frac: a plane needs this share of the valid pixels.
         min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
             of the disparity range: a floor spans it, from its horizon to the nearest thing in view;
@@ -57,11 +59,10 @@ class GroundConfig(Validated):
 
     _group: ClassVar[str] = "ground"
     _constraints: ClassVar[dict[str, Any]] = {
-        "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
-        "min_slope_frac": NON_NEGATIVE, "max_below_frac": FRACTION,
-        "iterations": POSITIVE_INT, "sample": POSITIVE_INT,
-        "support_frac": Interval(0, 1, open_lo=True), "noise_band": NON_NEGATIVE,
-        "max_protrusion_frac": FRACTION,
+        "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE,
+        "noise_band": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
+        "min_slope_frac": NON_NEGATIVE, "max_below_frac": FRACTION, "iterations": POSITIVE_INT,
+        "sample": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True), "max_protrusion_frac": FRACTION,
     }
 
     rule: str = "either"
@@ -89,8 +90,8 @@ class AreaConfig(Validated):
     Linking — which neurons form one area:
         similarity: two linked neurons are similar if their reference disparities differ by less
             than ``similarity ×`` the map's disparity spread.
-        link: ``"grid"`` (adjacent on the SOM grid: same row or column, one step; the paper's rule), ``"image"`` (their segments
-            share a boundary in the image) or ``"both"``.
+        link: ``"grid"`` (adjacent on the SOM grid: same row or column, one step; the paper's rule),
+            ``"image"`` (their segments share a boundary in the image) or ``"both"``.
         spread: ``"range"`` (d_max − d_min, the paper's) or ``"robust"`` (5th–95th percentile).
         min_boundary: two segments touch if their common boundary is at least this share of the
             shorter of their two perimeters.

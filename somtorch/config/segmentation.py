@@ -27,8 +27,9 @@ class FeatureConfig(Validated):
             the paper's runtime-optimised mode); the whole map is always segmented.
         color_weight: append the left image's Y, Cb, Cr (each in [0, 1]) times this weight to
             every pixel vector (0 = off; needs the scene's image).
-        reference_pixels: the pipeline's strides (``train_stride``, ``objects.map_stride``) are counted on an image of this many pixels (640 × 480), see
-            :meth:`stride_at`; 0 = strides in pixels as given (the paper's reading).
+        reference_pixels: the pipeline's strides (``train_stride``, ``objects.map_stride``) are
+            counted on an image of this many pixels (640 × 480), see :meth:`stride_at`; 0 = strides
+            in pixels as given (the paper's reading).
     """
 
     _group: ClassVar[str] = "features"

@@ -69,8 +69,8 @@ def test_purity_and_solidity_tests_reject_sgbm_junk_on_a_computed_disparity_map(
         cfg = PipelineConfig(ensemble=20, objects=AreaConfig(min_purity=purity, min_solidity=solid))
         members = run_pipeline(scene, cfg, metrics=False).members
         useful[purity, solid] = sum(m.score.useful_hit for m in members)
-        junk_first[purity, solid] = sum(not m.no_object and (m.kept[0].purity < 0.25 or m.kept[0].solidity_rel < 0.25)
-                                        for m in members)
+        junk_first[purity, solid] = sum(
+            not m.no_object and (m.kept[0].purity < 0.25 or m.kept[0].solidity_rel < 0.25) for m in members)
         reduction[purity, solid] = sum(m.score.reduction_union for m in members) / len(members)
     assert useful[0.25, 0.25] >= 15, useful
     assert junk_first[0.25, 0.25] <= 1 and junk_first[0.0, 0.25] <= 8, junk_first
