@@ -84,13 +84,13 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
 
 
 def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.box_coverage,
-               quantile: float = _D.box_quantile, stride: int = 1,
-               ground_residual: torch.Tensor | None = None, clutter_band: float = 0.0,
+               quantile: float = _D.box_quantile, ground_residual: torch.Tensor | None = None,
+               clutter_band: float = 0.0,
                drop_specks: bool = _D.drop_specks, mask: torch.Tensor | None = None) -> ObjectArea:
     """The box of the object inside a kept area, without the parts of its segments that are not it.
 
-    The area's pixels are split into image-connected pieces (8-connectivity, on every ``stride``-th
-    pixel), then
+    The area's pixels are split into image-connected pieces (8-connectivity; the pipeline passes the
+    object step's map, already sampled every ``map_stride``-th pixel), then
 
     0. with ``drop_specks``, pieces without a solid 3 × 3 block of samples are dropped: specks and
        sparse bands of speckles at the object's disparity (SGBM leaves them along the image border)
@@ -117,10 +117,7 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
 
     if coverage >= 1.0 and quantile <= 0.0 and not drop_specks and (ground_residual is None or clutter_band <= 0):
         return area
-    s = max(1, int(stride))
-    if mask is None:
-        mask = label_mask(labels, area.neurons)
-    mask = mask[::s, ::s].cpu().numpy()
+    mask = (label_mask(labels, area.neurons) if mask is None else mask).cpu().numpy()
     n, comp, st, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     if n <= 1:
         return area
@@ -128,7 +125,7 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
     pieces = np.arange(1, n)
     dropped = 0
     if ground_residual is not None and clutter_band > 0:
-        res = ground_residual[::s, ::s].cpu().numpy()
+        res = ground_residual.cpu().numpy()
         on_ground = np.bincount(comp[mask], weights=(res[mask] < clutter_band), minlength=n)[1:] / sizes
         flat = on_ground > 0.5
         if not flat.all():
@@ -149,10 +146,7 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
     q = min(max(quantile, 0.0), 0.5)
     x0, x1 = np.quantile(xs, [q, 1 - q], method="inverted_cdf") if q > 0 else (xs.min(), xs.max())
     y0, y1 = np.quantile(ys, [q, 1 - q], method="inverted_cdf") if q > 0 else (ys.min(), ys.max())
-    h, w = labels.shape
-    box = (int(x0) * s, int(y0) * s, min(w - 1, int(x1) * s + s - 1), min(h - 1, int(y1) * s + s - 1))
-    # never larger than the box of all the area's pixels (stride rounding)
-    box = (max(area.box[0], box[0]), max(area.box[1], box[1]), min(area.box[2], box[2]), min(area.box[3], box[3]))
+    box = (int(x0), int(y0), int(x1), int(y1))
     return replace(area, box=box, segment_box=area.box, ground_clutter_pieces=dropped)
 
 

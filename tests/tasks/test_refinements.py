@@ -21,11 +21,11 @@ def test_refine_box_drops_a_stray_fragment_but_keeps_the_body():
     labels[20:60, 30:70] = 0  # the object's segment: a 40x40 block ...
     labels[95:97, 2:4] = 0  # ... plus a 2x2 stray fragment far away (0.25 % of its pixels)
     area = _area([0], (2, 20, 69, 96))
-    tight = refine_box(area, labels, coverage=0.99, quantile=0.0, stride=1)
+    tight = refine_box(area, labels, coverage=0.99, quantile=0.0)
     assert tight.box == (30, 20, 69, 59)
     assert tight.segment_box == (2, 20, 69, 96)
     # coverage 1.0 keeps every piece: the paper's box of all segment pixels
-    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, drop_specks=False) is area
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, drop_specks=False) is area
 
 
 def test_refine_box_quantile_ignores_a_thin_protrusion():
@@ -33,10 +33,10 @@ def test_refine_box_quantile_ignores_a_thin_protrusion():
     labels[100:180, 40:160] = 0  # 9,600 px body
     labels[95:100, 100] = 0  # a 1-px wide, 5 px long antenna on top (0.05 % of the pixels), connected
     area = _area([0], (40, 95, 159, 179))
-    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, drop_specks=False) is area
-    trimmed = refine_box(area, labels, coverage=1.0, quantile=0.001, stride=1)  # 0.1 % = 9.6 px per side
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, drop_specks=False) is area
+    trimmed = refine_box(area, labels, coverage=1.0, quantile=0.001)  # 0.1 % = 9.6 px per side
     assert trimmed.box == (40, 100, 159, 179)  # the antenna is cut, a body edge (80 or 120 px) is not
-    assert refine_box(area, labels, coverage=1.0, quantile=0.0001, stride=1).box == area.box  # 1 px: kept
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0001).box == area.box  # 1 px: kept
 
 
 def test_refine_box_leaves_out_pieces_flat_on_the_ground_plane():
@@ -46,17 +46,17 @@ def test_refine_box_leaves_out_pieces_flat_on_the_ground_plane():
     labels[100:110, 100:150] = 0  # a floor streak with the object's disparity, on the plane
     residual[100:110, 100:150] = 0.3
     area = _area([0], (40, 30, 149, 109))
-    kept = refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, ground_residual=residual, clutter_band=1.0)
+    kept = refine_box(area, labels, coverage=1.0, quantile=0.0, ground_residual=residual, clutter_band=1.0)
     assert kept.box == (40, 30, 79, 69)
     assert kept.ground_clutter_pieces == 1
     # a band narrower than the streak's residual keeps it; no plane keeps it
-    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, ground_residual=residual, clutter_band=0.2) \
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, ground_residual=residual, clutter_band=0.2) \
         .box == area.box
-    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, ground_residual=None, clutter_band=1.0,
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, ground_residual=None, clutter_band=1.0,
                       drop_specks=False) is area
     # an area lying wholly on the plane is left as it is (nothing would remain)
     flat = torch.full((120, 160), 0.1)
-    assert refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, ground_residual=flat, clutter_band=1.0).box == area.box
+    assert refine_box(area, labels, coverage=1.0, quantile=0.0, ground_residual=flat, clutter_band=1.0).box == area.box
 
 
 def _stats_of(labels, disp):
@@ -246,12 +246,12 @@ def test_refine_box_drops_a_band_of_speckles_but_keeps_thin_parts_of_a_solid_pie
     band = torch.rand(6, 160, generator=g) < 0.3  # a sparse band of specks along the top border
     labels[:6][band] = 0
     area = _area([0], (0, 0, 159, 117))
-    plain = refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, drop_specks=False)
+    plain = refine_box(area, labels, coverage=1.0, quantile=0.0, drop_specks=False)
     assert plain.box[1] == 0  # the specks drag the box to the border
-    clean = refine_box(area, labels, coverage=1.0, quantile=0.0, stride=1, drop_specks=True)
+    clean = refine_box(area, labels, coverage=1.0, quantile=0.0, drop_specks=True)
     assert clean.box == (60, 40, 119, 117)  # the leg stays: it belongs to the solid piece
     # nothing solid at all: the area is left as it is
     specks = torch.full((50, 50), 1, dtype=torch.long)
     specks[::4, ::4] = 0
     sp = _area([0], (0, 0, 48, 48))
-    assert refine_box(sp, specks, coverage=1.0, quantile=0.0, stride=1, drop_specks=True).box == (0, 0, 48, 48)
+    assert refine_box(sp, specks, coverage=1.0, quantile=0.0, drop_specks=True).box == (0, 0, 48, 48)
