@@ -141,7 +141,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
                           ground_residual=ctx.ground_residual, clutter_band=ctx.clutter_band,
                           drop_specks=cfg.drop_specks, mask=own)
         solid = _opened_share(own, square)  # in [0, 1]: the opening keeps a subset of the pixels
-        done = replace(done, purity=box_purity(done, labels, ctx.integral), solidity=solid,
+        done = replace(done, purity=box_purity(done, labels, ctx.integral, own), solidity=solid,
                        solidity_rel=solid / ctx.solidity, confidence=confidence)
         if first is None:
             first = done

@@ -150,17 +150,22 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
     return replace(area, box=box, segment_box=area.box, ground_clutter_pieces=dropped)
 
 
-def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Tensor) -> float:
-    """Share of the valid pixels inside ``area.box`` that belong to the area's segments.
+def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Tensor,
+               mask: torch.Tensor | None = None) -> float:
+    """Share of the valid pixels inside ``area.box`` that belong to the area's segments (``mask``:
+    ``label_mask(labels, area.neurons)``, if the caller has it).
 
     Shape:
-        ``labels`` ``(H, W)``; ``valid_integral`` ``(H+1, W+1)``: the integral image of the valid mask.
+        ``labels``, ``mask`` ``(H, W)``; ``valid_integral`` ``(H+1, W+1)``: the integral image of the
+        valid mask.
     """
     x0, y0, x1, y1 = area.box
     ii = valid_integral
     n_valid = int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0])
-    crop = labels[y0:y1 + 1, x0:x1 + 1]
-    own = int(label_mask(crop, area.neurons).sum())
+    if mask is None:
+        own = int(label_mask(labels[y0:y1 + 1, x0:x1 + 1], area.neurons).sum())
+    else:
+        own = int(mask[y0:y1 + 1, x0:x1 + 1].sum())
     return own / max(n_valid, 1)
 
 

@@ -122,6 +122,8 @@ def test_box_purity_is_the_share_of_the_boxs_valid_pixels_that_are_the_areas_own
     ii = valid_integral(valid)
     assert box_purity(_area([1], (10, 10, 29, 19)), labels, ii) == 1.0
     assert box_purity(_area([1], (10, 10, 29, 29)), labels, ii) == 100 / (100 + 10 * 20)
+    own = labels == 1  # the caller's mask of the area's pixels gives the same share
+    assert box_purity(_area([1], (10, 10, 29, 29)), labels, ii, own) == 100 / (100 + 10 * 20)
 
 
 def _speckles_and_object():
