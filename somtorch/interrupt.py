@@ -29,7 +29,8 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["Interrupted", "checkpoint", "deferred", "install", "note", "requested", "reset", "worker_pool"]
+__all__ = ["Interrupted", "checkpoint", "deferred", "install", "leave_to_parent", "note", "requested", "reset",
+           "worker_pool"]
 
 
 class Interrupted(BaseException):
@@ -62,6 +63,7 @@ class _State:
     where: str = ""
     defer: int = 0
     installed: bool = False
+    left: frozenset[int] = frozenset()  # signals this process leaves to its parent (leave_to_parent)
 
 
 _state = _State()
@@ -80,9 +82,20 @@ def install(signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> bool:
     if threading.current_thread() is not threading.main_thread():
         return False
     for s in signals:
-        signal.signal(s, _handler)
+        if s not in _state.left:
+            signal.signal(s, _handler)
     _state.installed = True
     return True
+
+
+def leave_to_parent(signals: tuple[int, ...] = (signal.SIGINT,)) -> None:
+    """Ignore ``signals`` in this process, now and in every later :func:`install`: for a worker
+    whose parent decides when it stops. A terminal's Ctrl-C reaches the whole process group, and
+    the parent then sends the worker a signal of its own; a worker that also took the Ctrl-C would
+    take that second signal as "stop at once" and could die while marking its output folder."""
+    _state.left = _state.left | frozenset(signals)
+    for s in signals:
+        signal.signal(s, signal.SIG_IGN)
 
 
 def reset() -> None:
@@ -120,7 +133,7 @@ def deferred() -> Iterator[None]:
 
 
 def _worker_start(initializer: Callable[..., Any] | None, initargs: tuple) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides, and ends the workers
+    leave_to_parent()  # the parent decides, and ends the workers
     # tqdm's default write lock is a multiprocessing semaphore: a worker terminated while it exists
     # leaves the resource tracker a "leaked semaphore" warning; a worker shows no bars anyway
     from tqdm.std import tqdm

@@ -132,6 +132,16 @@ def plan_jobs(loader: Any, master: DictConfig, items: Sequence[tuple[int, Sequen
     return out
 
 
+def _send(conn: Any, msg: tuple[str, Any]) -> bool:
+    """Send ``msg`` to the launcher; False where a signal or a closed pipe stopped it on its way (the
+    launcher then counts the job as not done, and this worker has nothing left to clean up)."""
+    try:
+        conn.send(msg)
+    except BaseException:  # noqa: BLE001 - an Interrupted raised inside the write, or EPIPE
+        return False
+    return True
+
+
 def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> None:
     """A worker: run the composed configs that arrive on ``conn`` until None (or the pipe closes)."""
     from hydra._internal.callbacks import Callbacks
@@ -141,6 +151,10 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
     # tqdm's default write lock is a multiprocessing semaphore; a worker shows no bars, and a worker
     # killed while holding one leaves the resource tracker a "leaked semaphore" warning
     tqdm.set_lock(threading.RLock())
+    from somtorch import interrupt
+
+    interrupt.leave_to_parent()  # the launcher stops its workers with SIGTERM (Pool._stop), once
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked since the spawn (Pool._start)
     setup_globals()  # Hydra's resolvers; the task's module registers its own when imported (next)
     task_function = _task_function(*task)
     Singleton._instances = pickle.loads(state)  # as Singleton.set_state, without the resolvers: closures
@@ -159,9 +173,9 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
             try:
                 planned = plan_jobs(context.config_loader, master, items, estimate_path)
             except BaseException:  # noqa: BLE001 - the launcher composes these itself and says why
-                conn.send(("unplanned", None))
-                continue
-            conn.send(("planned", pickle.dumps(planned)))
+                planned = None
+            if not _send(conn, ("planned", pickle.dumps(planned)) if planned is not None else ("unplanned", None)):
+                return
             continue
         config = pickle.loads(payload)
         HydraConfig.instance().set_config(config)
@@ -169,12 +183,13 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
             ret = run_job(hydra_context=context, task_function=task_function, config=config,
                           job_dir_key="hydra.sweep.dir", job_subdir_key="hydra.sweep.subdir")
         except SystemExit as e:  # the job's one-line error or an interrupt: it has said why
-            conn.send(("exit", e.code if isinstance(e.code, int) else 1))
+            _send(conn, ("exit", e.code if isinstance(e.code, int) else 1))
             return
         except BaseException as e:  # noqa: BLE001 - a signal outside the job's handler
-            conn.send(("exit", 128 + int(getattr(e, "signum", signal.SIGINT))))
+            _send(conn, ("exit", 128 + int(getattr(e, "signum", signal.SIGINT))))
             return
-        conn.send(("done", pickle.dumps(_portable(ret))))
+        if not _send(conn, ("done", pickle.dumps(_portable(ret)))):  # a signal while the result was on its way
+            return
 
 
 def _reply(conn: Any) -> tuple[str, Any]:
@@ -210,9 +225,13 @@ class Pool:
         proc = self.ctx.Process(target=_serve, args=(child, *self.args), daemon=True)
         old = os.environ.get(ENV_PROGRESS)
         os.environ[ENV_PROGRESS] = "0"  # inherited by the spawned worker only
+        # spawned with SIGINT blocked (the mask is inherited): a Ctrl-C to the process group while the
+        # worker still imports cannot print its traceback; _serve then ignores SIGINT and unblocks it
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
             proc.start()
         finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
             if old is None:
                 os.environ.pop(ENV_PROGRESS, None)
             else:

@@ -79,3 +79,29 @@ def test_study_stops_cleanly_on_sigint(tmp_path):
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
     assert _stopped_in_training(err.strip().splitlines()[-1], "SIGINT"), err
     assert (folder / "FAILED").exists() and not list(folder.glob(".partial-*"))
+
+
+def test_a_worker_that_leaves_sigint_to_its_parent_takes_only_the_parents_signal():
+    # a Ctrl-C reaches the whole process group; a launcher's worker must not take it as well as the
+    # SIGTERM its launcher then sends (a second signal stops at once, even while it marks its folder)
+    code = """
+import os, signal, time
+from somtorch import interrupt
+interrupt.leave_to_parent()
+assert interrupt.install()
+assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+assert signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
+os.kill(os.getpid(), signal.SIGINT)
+time.sleep(0.2)
+assert interrupt.requested() is None
+try:
+    with interrupt.deferred():
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.2)
+        assert interrupt.requested() == signal.SIGTERM
+except interrupt.Interrupted as e:
+    print("stopped by", e.signal_name)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "stopped by SIGTERM"

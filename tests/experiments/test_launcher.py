@@ -126,6 +126,38 @@ def test_a_signal_stops_every_worker_and_marks_their_folders(tmp_path, sig, code
 
 
 @pytest.mark.slow
+def test_a_signal_while_a_worker_sends_its_result_ends_the_worker_quietly():
+    # CI once printed a worker's traceback: SIGTERM landed inside the write of a "done" message the
+    # launcher was not reading (it was stopping). A blocked send, interrupted, must return False.
+    import multiprocessing
+    import threading
+
+    from hydra_plugins.somtorch_launcher._workers import _send
+    from somtorch import interrupt
+
+    parent, child = multiprocessing.Pipe()
+    old = signal.getsignal(signal.SIGTERM)
+    interrupt.reset()
+    try:
+        assert interrupt.install((signal.SIGTERM,))
+        timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM))
+        timer.start()
+        t0 = time.monotonic()
+        assert _send(child, ("done", b"x" * (64 << 20))) is False  # far more than a pipe holds: blocks
+        assert time.monotonic() - t0 < 30 and interrupt.requested() == signal.SIGTERM
+        timer.join()
+    finally:
+        signal.signal(signal.SIGTERM, old)
+        interrupt.reset()
+        parent.close()
+        child.close()
+    a, b = multiprocessing.Pipe()
+    assert _send(a, ("done", 1)) is True and b.recv() == ("done", 1)
+    b.close()
+    assert _send(a, ("done", 2)) is False  # the launcher's end closed: no exception either
+    a.close()
+
+
 def test_a_bad_config_refuses_the_whole_sweep_before_any_job_runs(tmp_path):
     # train.epochs=0 fails the job's config rules: one line naming the job, status 2, nothing run
     code, err = _finished(tmp_path, *SMALL, "train.epochs=3,0", "hydra.launcher.n_jobs=2")
