@@ -161,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
         f" = {n_px:,} px, {n_valid:,} valid ({n_valid / n_px:.1%})",
         f"config: PipelineConfig() except som=SOMConfig(rows={st.rows}, cols={st.cols}), ensemble=1 -> "
         f"train mode={tc.mode}, epochs={tc.epochs}, features stride={fc.train_stride}, "
-        f"d_weight={fc.d_weight}, ground rule={cfg.ground.rule}, objects select={cfg.objects.select}",
+        f"d_weight={fc.d_weight}, ground rule={cfg.ground.rule}, objects rule={cfg.objects.rule}",
         "timing: result.timings per stage (point cloud not included); run_pipeline(progress=False, "
         "metrics=False); seed = run index; 1 untimed warm-up",
     ]

@@ -3,7 +3,7 @@
 and the share of the labelled objects' pixels inside its mask, under two ground configs side by side.
 
     python -m experiments.ground_report                              # defaults vs the support rule
-    python -m experiments.ground_report after.rule=either after.max_protrusion_frac=0.5
+    python -m experiments.ground_report after.rule=either after.support_frac=0.5
     python -m experiments.ground_report 'frames=[kitti,oakd_toy]' before.rule=none
 
 (``somtorch-validate`` runs the whole pipeline 30 times per scene; this reads only the ground step,

@@ -223,7 +223,7 @@ def _log_hparams(writer, cfg: RunConfig, metrics: dict) -> None:
     hp = {"rows": cfg.som.rows, "cols": cfg.som.cols, "mode": cfg.train.mode, "epochs": cfg.train.epochs,
           "lr": cfg.train.lr, "sigma": cfg.train.sigma if cfg.train.sigma is not None else -1.0,
           "d_weight": cfg.features.d_weight, "train_stride": cfg.features.train_stride,
-          "select": cfg.objects.select, "similarity": cfg.objects.similarity,
+          "objects_rule": cfg.objects.rule, "similarity": cfg.objects.similarity,
           "tolerance_frac": cfg.reduction.tolerance_frac,
           "tolerance_image": cfg.reduction.tolerance_image, "ensemble": cfg.ensemble, "seed": cfg.seed}
     m0 = metrics["members"][cfg.output.member]

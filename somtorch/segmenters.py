@@ -9,8 +9,9 @@ reduction and scoring, so baselines compare like for like:
 * ``"slic"`` / ``"felzenszwalb"`` — scikit-image superpixels of the disparity image (deterministic:
   one run whatever ``ensemble`` says).
 
-Segmenters without a grid (k-means, superpixels) refuse ``objects.link="grid"``: linking through a
-grid they do not have would silently mean something else.
+Segmenters without a grid (k-means, superpixels) refuse ``objects.rule="paper"`` (the paper links
+neurons adjacent on the SOM grid): linking through a grid they do not have would silently mean
+something else.
 """
 
 from __future__ import annotations
@@ -205,15 +206,15 @@ METHODS = tuple(SEGMENTERS)
 def run_segmenter(feats: Features, train: Features, scene: Any, usable: torch.Tensor, cfg: PipelineConfig, *,
                   progress: bool = False, log_training: Callable[[str, float, int], Any] | None = None,
                   timer: Callable[[str], Any] = lambda stage: nullcontext()) -> Segmentation:
-    """Run the segmenter ``cfg.method`` (checks first that it can honour ``cfg.objects.link``).
+    """Run the segmenter ``cfg.method`` (checks first that it can honour ``cfg.objects.rule``).
 
     ``timer(stage)``: a context manager timing the stages ``"train"`` and ``"segment"`` (the BMU
     labelling of every pixel, for segmenters with prototypes).
     """
     seg = SEGMENTERS[cfg.method]
-    if not seg.has_grid and cfg.objects.link != "image":
-        raise ValueError(f"method={cfg.method!r} has no SOM grid, so objects.link={cfg.objects.link!r} cannot "
-                         "be honoured; use objects.link=image")
+    if not seg.has_grid and cfg.objects.rule == "paper":
+        raise ValueError(f"method={cfg.method!r} has no SOM grid, so objects.rule=paper (neurons adjacent on "
+                         "the grid) cannot be honoured; use objects.rule=salient")
     with timer("train"):
         out = seg.fn(feats, train, scene, usable, cfg, cfg.runs, progress, log_training)
     with timer("segment"):

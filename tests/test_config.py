@@ -62,18 +62,16 @@ def test_the_paper_preset_pins_every_value_that_differs_from_the_default():
     assert (paper.train.mode, paper.features.normalize, paper.features.d_weight) == ("online", "minmax", 1.0)
     assert paper.ground.rule == "none"
     o = paper.objects
-    assert (o.similarity, o.link, o.spread, o.select, o.merge, o.min_purity, o.min_solidity, o.fail_safe) == \
-        (0.1, "grid", "range", "nearest", 0.0, 0.0, 0.0, False)
-    assert (o.box_coverage, o.box_quantile, o.ground_clutter, o.max_areas, o.drop_specks) == \
-        (1.0, 0.0, 0.0, 1, False)
+    assert (o.rule, o.similarity, o.merge, o.min_purity, o.min_solidity) == ("paper", 0.1, 0.0, 0.0, 0.0)
+    assert (o.box_coverage, o.box_quantile, o.ground_clutter, o.drop_specks, o.map_stride) == \
+        (1.0, 0.0, 0.0, False, 1)
     r = paper.reduction
     assert (r.tolerance_px, r.tolerance_frac, r.tolerance_image) == (0, 0.05, 0.0)
 
 
 @pytest.mark.parametrize("cls, kwargs, words", [
     (AreaConfig, {"min_purity": 2.0}, ["objects.min_purity", "[0, 1]", "2.0"]),
-    (AreaConfig, {"select": "largest"}, ["objects.select", "largest", "all, nearest, salient"]),
-    (AreaConfig, {"link": "diagonal"}, ["objects.link", "diagonal", "both, grid, image"]),
+    (AreaConfig, {"rule": "largest"}, ["objects.rule", "largest", "paper, salient"]),
     (AreaConfig, {"keep_budget": 0.0}, ["objects.keep_budget", "(0, 1]"]),
     (TrainConfig, {"parallel": "data", "mode": "online"}, ["parallel='data'", "mode='online'"]),
     (GroundConfig, {"min_inlier_frac": -0.1}, ["ground.min_inlier_frac"]),
@@ -102,12 +100,12 @@ def test_wrong_types_are_type_errors_and_overrides_are_validated():
         with_overrides(PipelineConfig(), {"objects.merge": -1.0})
 
 
-def test_a_segmenter_without_a_grid_refuses_grid_linking(shared_data):
+def test_a_segmenter_without_a_grid_refuses_the_paper_rule(shared_data):
     from somtorch.disparity import load_scene
     from somtorch.pipeline import run_pipeline
 
     scene = load_scene("motorcycle")
-    cfg = with_overrides(PipelineConfig(method="kmeans"), {"objects.link": "grid"})
+    cfg = with_overrides(PipelineConfig(method="kmeans"), {"objects.rule": "paper"})
     with pytest.raises(ValueError, match="no SOM grid"):
         run_pipeline(scene, cfg, metrics=False)
 

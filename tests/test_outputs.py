@@ -15,7 +15,7 @@ from somtorch.pipeline import PipelineConfig, TrainConfig, run_pipeline
 from somtorch.tasks.objects import AreaConfig
 
 MAPS = ("disparity", "segments_grey", "segments_color", "reference_vectors", "areas", "reduced_disparity")
-PAPER = AreaConfig(select="nearest")
+PAPER = AreaConfig(rule="paper")
 
 
 def _cfg(ensemble: int) -> PipelineConfig:

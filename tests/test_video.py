@@ -52,7 +52,7 @@ def test_a_cold_frame_is_what_run_pipeline_gives():
 
 def test_runner_checks_its_settings():
     with pytest.raises(ValueError, match="method='som'"):
-        SequenceRunner(with_overrides(PipelineConfig(), {"method": "kmeans", "objects.link": "image"}))
+        SequenceRunner(with_overrides(PipelineConfig(), {"method": "kmeans"}))
     with pytest.raises(ValueError):
         SequenceRunner(warm_epochs=0)
     with pytest.raises(ValueError):

@@ -19,8 +19,7 @@ class GroundConfig(Validated):
     Verification (``rule``): ``"none"`` — no ground handling (the paper's pipeline);
     ``"position"`` — where a forward camera sees its floor (``min_slope_frac``, tilt in x ≤ tilt in
     y; RANSAC on the lower image half); ``"support"`` — by what the plane supports, at any camera
-    pitch (``support_frac`` of the pixels on it, the pixels above it in compact protrusions of at
-    most ``max_protrusion_frac``; RANSAC on the whole map);
+    pitch (``support_frac`` of the pixels on it; RANSAC on the whole map);
     ``"either"`` — a plane passing either (RANSAC on the lower half). Every rule needs
     ``min_inlier_frac``; the position rule also ``max_below_frac`` (nothing substantial behind the
     plane), which a support-verified plane need not pass: a table top holding most of the view
@@ -44,10 +43,6 @@ class GroundConfig(Validated):
         support_frac: support rule: the plane holds at least this share of the valid pixels (a
             floor or table top filling the view; a forward camera's floor holds 14–40 %, the
             far-room slab of oakd_pov_controllers 55 %: docs/method.md).
-        max_protrusion_frac: support rule: every image-connected piece of the pixels *above* the
-            plane (nearer than its band where it is in view) holds at most this share of the valid
-            pixels — objects standing on a surface are compact; a scene standing in front of a
-            wall-like plane is not.
         max_below_frac: position rule: a floor hides what lies beneath it, so at most this share of
             the valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
             (disparity below the band); a ramp, a lattice or a plane through the objects fails
@@ -62,7 +57,7 @@ class GroundConfig(Validated):
         "rule": Choice(options.GROUND_RULES), "tol_frac": NON_NEGATIVE, "tol_px": NON_NEGATIVE,
         "noise_band": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_below_frac": FRACTION, "iterations": POSITIVE_INT,
-        "sample": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True), "max_protrusion_frac": FRACTION,
+        "sample": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
     }
 
     rule: str = "either"
@@ -74,7 +69,6 @@ class GroundConfig(Validated):
     iterations: int = 400
     sample: int = 5000
     support_frac: float = 0.6
-    max_protrusion_frac: float = 0.2
     noise_band: float = 2.0
 
 
@@ -84,29 +78,32 @@ class AreaConfig(Validated):
     """Object-area recognition (paper step 1c), see :mod:`somtorch.tasks.objects` and
     :mod:`somtorch.tasks.refine`.
 
-    The defaults are the ``robust`` rule; ``conf/objects/paper.yaml`` holds the paper's literal rule
-    (``link="grid"``, ``spread="range"``, ``similarity=0.1``, ``select="nearest"``, no refinement).
+    The defaults are the ``salient`` rule; ``conf/objects/paper.yaml`` holds the paper's literal rule
+    (``rule="paper"``, ``similarity=0.1``, no refinement).
+
+    The rule:
+        rule: ``"salient"``: neurons link where their segments share a boundary in the image (at
+            least ``min_boundary``), the spread is the 5th–95th percentile of the map's disparity,
+            the areas in front of their surroundings are ranked by contrast ×
+            ``area_frac ** size_power`` and up to ``max_areas`` are kept; when no candidate passes
+            the checks below, the whole map is kept (flagged ``no_object``).
+            ``"paper"``: the paper read literally: neurons adjacent on the SOM grid (one step along
+            a row or a column), the spread is the full range d_max − d_min, the nearest area (largest
+            mean disparity) is kept, always.
 
     Linking — which neurons form one area:
         similarity: two linked neurons are similar if their reference disparities differ by less
             than ``similarity ×`` the map's disparity spread.
-        link: ``"grid"`` (adjacent on the SOM grid: same row or column, one step; the paper's rule),
-            ``"image"`` (their segments share a boundary in the image) or ``"both"``.
-        spread: ``"range"`` (d_max − d_min, the paper's) or ``"robust"`` (5th–95th percentile).
         min_boundary: two segments touch if their common boundary is at least this share of the
-            shorter of their two perimeters.
+            shorter of their two perimeters (``salient`` rule).
 
-    Selection — which areas are kept:
-        select: ``"nearest"`` (largest mean disparity, the paper's), ``"salient"`` (ranked by
-            contrast to the surrounding segments × ``area_frac ** size_power``) or ``"all"``.
-        size_power: weight of the area's size in the salient ranking (0 = contrast alone).
+    Selection — which areas are kept (``salient`` rule):
+        size_power: weight of the area's size in the ranking (0 = contrast alone).
         max_areas: how many areas are kept at most.
         keep_budget: a further area is kept only if the union of the kept boxes then holds at most
             this share of the valid pixels (the data-reduction budget: every salient area that
             fits is kept, one that would make the reduction too small is skipped; the first area
             is always kept). 1 = no budget.
-        fail_safe: when no candidate passes the checks, keep the whole map (and flag
-            ``no_object``) instead of the best-ranked candidate.
 
     Refinement — from a selected area to its kept box:
         merge: join the image-adjacent segments whose mean disparity is within ``merge ×`` the
@@ -133,20 +130,16 @@ class AreaConfig(Validated):
 
     _group: ClassVar[str] = "objects"
     _constraints: ClassVar[dict[str, Any]] = {
-        "similarity": POSITIVE, "link": Choice(options.LINKS),
-        "spread": Choice(options.SPREADS), "min_boundary": NON_NEGATIVE,
+        "rule": Choice(options.OBJECT_RULES), "similarity": POSITIVE, "min_boundary": NON_NEGATIVE,
         "size_power": NON_NEGATIVE, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
-        "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION, "min_solidity": FRACTION,
-        "solidity_size": Interval(0, 0.5, open_lo=True),
-        "select": Choice(options.SELECTIONS), "max_areas": POSITIVE_INT,
-        "keep_budget": Interval(0, 1, open_lo=True),
-        "fail_safe": BOOL,
+        "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION,
+        "min_solidity": FRACTION, "solidity_size": Interval(0, 0.5, open_lo=True),
+        "max_areas": POSITIVE_INT, "keep_budget": Interval(0, 1, open_lo=True),
     }
 
+    rule: str = "salient"
     similarity: float = 0.05
-    link: str = "image"
-    spread: str = "robust"
     min_boundary: float = 0.1
     size_power: float = 0.25
     map_stride: int = 2
@@ -158,7 +151,5 @@ class AreaConfig(Validated):
     min_purity: float = 0.25
     min_solidity: float = 0.25
     solidity_size: float = 0.02
-    select: str = "salient"
     max_areas: int = 4
     keep_budget: float = 0.3
-    fail_safe: bool = True

@@ -8,8 +8,8 @@ from here, or a test checks that its registry matches), so validating a config i
 
 from __future__ import annotations
 
-__all__ = ["D_MODES", "DECAYS", "GROUND_RULES", "INITS", "LINKS", "METHODS", "MODES", "NEIGHBORHOODS", "NORMALIZATIONS", "ORDERS",
-           "SELECTIONS", "SPREADS", "SYNTH_FAMILIES", "TOPOLOGIES", "register_method"]
+__all__ = ["D_MODES", "DECAYS", "GROUND_RULES", "INITS", "METHODS", "MODES", "NEIGHBORHOODS", "NORMALIZATIONS", "OBJECT_RULES", "ORDERS",
+           "SYNTH_FAMILIES", "TOPOLOGIES", "register_method"]
 
 # somtorch.core
 MODES = ("online", "batch", "minibatch")  # SOM.fit's update rules
@@ -24,9 +24,7 @@ D_MODES = ("raw", "plane_residual")  # FeatureConfig.d_mode (applied by somtorch
 # somtorch.tasks.ground
 GROUND_RULES = ("none", "position", "support", "either")
 # somtorch.tasks.objects
-SELECTIONS = ("nearest", "salient", "all")
-LINKS = ("grid", "image", "both")
-SPREADS = ("range", "robust")
+OBJECT_RULES = ("salient", "paper")
 # somtorch.synth: the generator's scene families (keys of somtorch.synth.FAMILIES, in that order)
 SYNTH_FAMILIES = ("stairs", "garden", "road", "room", "tabletop", "hands", "fence", "clutter", "floor")
 # somtorch.segmenters: name -> deterministic (one run whatever ``ensemble`` says)

@@ -9,7 +9,7 @@ ensemble. Per member it
 2. finds the object areas (:func:`~somtorch.tasks.objects.find_object_areas`),
 3. ranks the candidates (:func:`~somtorch.tasks.objects.select_areas`) and, in rank order, joins,
    refines and checks each (:func:`kept_areas`),
-4. and, when nothing convincing is left and ``fail_safe`` is on, keeps the whole map and flags
+4. and, when nothing convincing is left under the ``salient`` rule, keeps the whole map and flags
    ``no_object`` — for a system meant to keep obstacles, dropping everything is the worst outcome.
 """
 
@@ -114,8 +114,9 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     the first kept area, a further one must, with ``cfg.keep_budget < 1``, leave the union of the
     kept boxes within that share of the valid pixels (else it is skipped and the next candidate
     tried). At most ``cfg.max_areas`` are kept, out of the ``cfg.max_areas``
-    best-ranked candidates (a failed check leaves room for the next of them). If none passed: the
-    best-ranked candidate, or nothing with ``cfg.fail_safe`` (the caller keeps the whole map).
+    best-ranked candidates (a failed check leaves room for the next of them). If none passed:
+    nothing under the ``salient`` rule (the caller keeps the whole map), the paper rule's nearest
+    area under ``rule="paper"`` (the paper always keeps it).
 
     Every kept area carries its ``purity``, ``solidity`` (the opened share of its pixels, ≤ 1),
     ``solidity_rel`` (that share over the map's own, which may exceed 1: the area is more solid than
@@ -155,7 +156,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             taken[torch.tensor(done.neurons)] = True
             if len(kept) == cfg.max_areas:
                 break
-    if not kept and first is not None and not cfg.fail_safe:
+    if not kept and first is not None and cfg.rule == "paper":
         kept = [first]
     for i, a in enumerate(kept):
         a.rank = i

@@ -16,8 +16,8 @@ That is the ``"position"`` rule (``GroundConfig.rule``): it recognises a floor b
 camera sees it. The ``"support"`` rule recognises it by what it supports, at any camera pitch — a
 floor filling the frame of a camera looking down, a table top, a slope: RANSAC on the whole map, no
 test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels
-and every image-connected piece of the pixels above it (nearer than its band, where it is in view)
-must be a compact protrusion of at most ``max_protrusion_frac`` of the pixels. The position rule
+(session 12 deleted a second test, that what stands on it comes in compact pieces: it changed no
+real frame and cost the synthetic ones, docs/tuned_constants.md). The position rule
 also wants nothing substantial behind the plane (``max_below_frac``: a floor hides what lies
 beneath it); a support-verified plane need not pass that test (a table top holding most of the
 view has the floor beyond its edges behind it). ``"either"`` accepts a plane that
@@ -173,8 +173,7 @@ def _predict(coef: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:
 def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, oriented: torch.Tensor,
                     cfg: GroundConfig) -> torch.Tensor:
     """Which hypotheses ``coef`` ``(I, 3)`` pass the tests of ``cfg.rule`` on the sample ``q``
-    ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated;
-    the protrusions need the image and are left to the full map). ``oriented`` ``(I,)``: the
+    ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated). ``oriented`` ``(I,)``: the
     hypotheses that pass the position rule's orientation test."""
     pred = _predict(coef, q)  # (I, N)
     d = q[None, :, 2].float()
@@ -198,7 +197,7 @@ def _verified(best: torch.Tensor, pts: torch.Tensor, disparity: torch.Tensor, ok
               tol: float, min_b: float, cfg: GroundConfig) -> GroundPlane | None:
     """Hypothesis ``best`` refined by least squares on its inliers among ``pts`` and tested on the
     full map (:func:`verify_plane`) — inlier share and scene behind it for every rule; slope, tilt
-    and inliers in the top third (position rule); inlier share and protrusions (support rule) — or None."""
+    and inliers in the top third (position rule); inlier share (support rule) — or None."""
     # refine by least squares on the inliers of the sampled pixels, then recompute on the full map
     inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
     if int(inl.sum()) >= 3:
@@ -232,27 +231,14 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     frac = int(mask.sum()) / n_valid
     if frac < cfg.min_inlier_frac:
         return None
-    seen = ok & (plane > tol)  # where the plane is in view
     if position and cfg.max_below_frac < 1.0:  # share of the pixels where the plane is in view behind it
+        seen = ok & (plane > tol)  # where the plane is in view
         behind = seen & (d < plane - tol)
         position = int(behind.sum()) <= cfg.max_below_frac * max(int(seen.sum()), 1)
-    support = cfg.rule != "position" and frac >= cfg.support_frac \
-        and largest_protrusion(seen & (d > plane + tol)) <= cfg.max_protrusion_frac * n_valid
+    support = cfg.rule != "position" and frac >= cfg.support_frac
     if not _either(cfg.rule, position, support):
         return None
     return GroundPlane(a, b, c, tol, mask, frac, support)
-
-
-def largest_protrusion(above: torch.Tensor) -> int:
-    """Pixels of the largest 8-connected piece of ``above`` ``(H, W)`` bool (0 if empty): what
-    stands on a support surface comes in compact pieces."""
-    import cv2
-    import numpy as np
-
-    if not bool(above.any()):
-        return 0
-    n, _, stats, _ = cv2.connectedComponentsWithStats(above.numpy().astype(np.uint8), connectivity=8)
-    return int(stats[1:, cv2.CC_STAT_AREA].max())
 
 
 def _plane_fit(pts: torch.Tensor) -> torch.Tensor:

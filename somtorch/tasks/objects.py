@@ -8,10 +8,13 @@ Everything works on neuron-level statistics (``neuron_stats``: pixel count, mean
 image-space boundary between segments and with the ground), computed in one pass over the label
 map, so recognition costs O(K²) whatever the image size.
 
-Selection of the kept areas:
+Linking and selection follow ``AreaConfig.rule``:
 
-* ``"nearest"`` — the paper's rule: the area with the largest mean disparity;
-* ``"salient"`` — areas that stand out from their surroundings: contrast = mean disparity of the
+* ``"paper"`` — the paper's rule: neurons adjacent on the SOM grid with similar reference
+  disparities (similarity relative to the full disparity range) link; the area with the largest
+  mean disparity is kept;
+* ``"salient"`` — segments that share a boundary in the image link (similarity relative to the 5th–95th
+  percentile spread); areas that stand out from their surroundings: contrast = mean disparity of the
   area − boundary-weighted mean disparity of what touches it in the image: the segments around it
   and, where the ground plane was cut out of the map, the ground pixels along its outline that lie
   *behind* the segment they touch (:func:`surround_pairs`). A support surface is background where
@@ -20,8 +23,7 @@ Selection of the kept areas:
   it in a forward view — it says nothing about the object's salience and is left out. Without
   that, an object the ground cut isolates from every segment had no contrast at all. The areas in
   front of their surroundings (contrast ≥ 0) are ranked by contrast × ``area_frac ** size_power``,
-  at most ``max_areas``;
-* ``"all"`` — every area, nearest first.
+  at most ``max_areas``.
 
 What happens to the selected areas afterwards (joining adjacent segments, box refinement, growing,
 the purity test) is in :mod:`somtorch.tasks.refine`; :func:`~somtorch.tasks.detect.kept_areas` runs
@@ -35,7 +37,6 @@ from dataclasses import dataclass
 import torch
 
 from ..config import AreaConfig
-from ..config.options import LINKS, SELECTIONS, SPREADS
 from ..validation import check_tensor
 
 
@@ -243,7 +244,7 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
         ref_disparity: reference disparity of each neuron in px ``(K,)``.
         grid_d2: squared grid distances ``(K, K)`` of the SOM (adjacent = 1, diagonal = 2), or None
             for segmenters without a grid (k-means, superpixels): their segments link through the
-            image only, whatever ``cfg.link`` says.
+            image, whatever ``cfg.rule`` says.
         stats: :func:`neuron_stats` of the member's label map.
         cfg: recognition parameters.
 
@@ -252,13 +253,12 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
     """
     cfg = cfg or AreaConfig()
     ref = ref_disparity.double().cpu()
-    link = cfg.link if grid_d2 is not None else "image"
-    tau = cfg.similarity * stats.spread(cfg.spread)
-    if grid_d2 is not None:
+    paper = cfg.rule == "paper"
+    tau = cfg.similarity * stats.spread("range" if paper else "robust")
+    if paper and grid_d2 is not None:
         near = grid_d2.cpu() <= 1.0 + 1e-6  # adjacent on the grid: one step along a row or a column
-    if link != "grid":
-        touch = _touching(stats, cfg.min_boundary)
-        near = touch if link == "image" else near | touch
+    else:
+        near = _touching(stats, cfg.min_boundary)
     adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
     adj.fill_diagonal_(False)
     return areas_of(_components(adj), stats)
@@ -308,15 +308,11 @@ def areas_of(comps: list[list[int]], stats: NeuronStats) -> list[ObjectArea]:
 def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | None = None) -> list[ObjectArea]:
     """The kept areas, best first, with ``rank`` set (see the module docstring)."""
     cfg = cfg or AreaConfig()
-    if cfg.select == "nearest":
+    if cfg.rule == "paper":
         ranked = sorted(areas, key=lambda a: -a.mean_disparity)[:1]
     else:
-        if cfg.select == "salient":
-            ok = [a for a in areas if a.contrast >= 0]  # in front of its surroundings, or not salient
-            ranked = sorted(ok, key=lambda a: -rank_score(a, cfg))
-        else:
-            ranked = sorted(areas, key=lambda a: -a.mean_disparity)
-        ranked = ranked[:cfg.max_areas]
+        ok = [a for a in areas if a.contrast >= 0]  # in front of its surroundings, or not salient
+        ranked = sorted(ok, key=lambda a: -rank_score(a, cfg))[:cfg.max_areas]
     for i, a in enumerate(ranked):
         a.rank = i
     return ranked

@@ -119,8 +119,8 @@ def test_stereo_pair_without_a_left_image_is_missing():
     ("objects.selectt=1", "selectt"),
     ("som.rowz=3", "rowz"),
     ("ensemble=two", "ensemble"),
-    ("objects.select=bogus", "bogus"),
-    ("objects.link=diagonal", "diagonal"),
+    ("objects.rule=bogus", "bogus"),
+    ("objects.link=grid", "link"),  # a field that was folded into objects.rule
     ("objects.keep_budget=2.0", "keep_budget"),
 ])
 def test_typos_wrong_types_and_bad_values_fail_at_composition(override, names):

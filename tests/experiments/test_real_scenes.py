@@ -24,7 +24,7 @@ def test_config_composes_with_each_preset(preset):
     assert isinstance(obj, ScenesConfig)
     assert obj.frames is None and obj.datasets is None
     if preset == "paper":
-        assert (obj.som.rows, obj.som.cols, obj.objects.select, obj.ground.rule) == (4, 7, "nearest", "none")
+        assert (obj.som.rows, obj.som.cols, obj.objects.rule, obj.ground.rule) == (4, 7, "paper", "none")
         assert obj.label == "paper"
 
 

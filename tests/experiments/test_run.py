@@ -81,7 +81,7 @@ def test_metrics_json_is_complete(embedded_run):
     assert "features.reference_pixels=307200" in m["pixels"]["train_stride_reason"]
     assert len(m["members"]) == 2 and [mem["seed"] for mem in m["members"]] == [0, 1]
     assert all(len(mem["kept_areas"]) == 1 for mem in m["members"])
-    assert m["config"]["ensemble"] == 2 and m["config"]["objects"]["select"] == "nearest"
+    assert m["config"]["ensemble"] == 2 and m["config"]["objects"]["rule"] == "paper"
     pc = m["pointcloud"]
     assert pc["written"] is True and pc["points_full"] == scene.n_valid
     with np.load(embedded_run / "reduced.npz") as z:
@@ -287,7 +287,7 @@ def test_a_run_killed_with_sigterm_leaves_no_staging_folder(tmp_path):
 
 @pytest.mark.parametrize("override, words", [
     ("som.rows=0", ["som.rows", "[1, inf)"]),
-    ("objects.select=bogus", ["objects.select", "salient"]),
+    ("objects.rule=bogus", ["objects.rule", "salient"]),
     ("output.member=5", ["output.member"]),
 ])
 def test_bad_input_ends_in_one_line_on_stderr_and_exit_status_2(tmp_path, override, words):

@@ -25,11 +25,11 @@ def _run(module: str, *overrides: str, cwd: Path = ROOT, timeout: int = 300) -> 
 
 
 def test_ground_report_prints_one_row_per_frame(shared_data):
-    proc = _run("ground_report", "frames=[kitti,oakd_toy]", "after.max_protrusion_frac=0.5",
+    proc = _run("ground_report", "frames=[kitti,oakd_toy]", "after.support_frac=0.5",
                 "before.rule=none", f"paths.data_dir={shared_data}")
     assert proc.returncode == 0, proc.stderr[-2000:]
     lines = proc.stdout.splitlines()
-    assert lines[0] == "before: rule=none; after: rule=support max_protrusion_frac=0.5"
+    assert lines[0] == "before: rule=none; after: rule=support support_frac=0.5"
     rows = [ln for ln in lines if ln.startswith("| ") and not ln.startswith("| frame")]
     assert [r.split(" | ")[0] for r in rows] == ["| kitti", "| oakd_toy"]
     for r in rows:  # before: no plane looked for; after: found or not, with its share

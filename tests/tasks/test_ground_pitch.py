@@ -118,25 +118,24 @@ def test_a_plane_cutting_through_a_large_object_is_refused():
     obj = objects > 0
     assert 0.2 < float(obj.float().mean()) < 0.3
     for rule in ("support", "either"):
-        cfg = GroundConfig(rule=rule, max_protrusion_frac=0.5)
+        cfg = GroundConfig(rule=rule)
         floor = verify_plane(_plane_of(pitch, True, HEIGHT_M), d, valid, 0.5, cfg)
         assert floor is not None and int((floor.mask & obj).sum()) <= 0.03 * int(obj.sum())  # its foot
         assert verify_plane(_plane_of(pitch, True, HEIGHT_M - 0.3), d, valid, 0.5, cfg) is None  # top face
         assert verify_plane(_plane_of(pitch, False, 0.4), d, valid, 0.5, cfg) is None  # front face
         g = fit_ground_plane(d, valid, cfg)
         assert g is not None and int((g.mask & obj).sum()) <= 0.03 * int(obj.sum())
-    # by default a protrusion of a quarter of the image is not compact: no support plane at all
-    assert fit_ground_plane(d, valid, SUPPORT) is None
 
 
-def test_the_support_rule_refuses_a_plane_with_a_large_protrusion():
-    # a floor from above under one object covering a third of the image: the floor holds enough
-    # pixels but what stands on it is not a compact protrusion at max_protrusion_frac 0.2
+def test_the_support_rule_finds_the_floor_under_an_object_a_third_of_the_image():
+    # a floor from above under one object covering a third of the image: the floor is the support
+    # plane when it holds enough of the pixels, the object stays out of its mask
     d, valid, objects = render(90, [(-0.25, 0.25, -0.2, 0.2, 0.2)])
-    assert 0.3 < float((objects > 0).float().mean()) < 0.4
-    assert fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.4)) is None
-    assert fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.4,
-                                                   max_protrusion_frac=0.5)) is not None
+    obj = objects > 0
+    assert 0.3 < float(obj.float().mean()) < 0.4
+    g = fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.4))
+    assert g is not None and g.support and int((g.mask & obj).sum()) <= 0.03 * int(obj.sum())
+    assert fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.7)) is None  # it holds < 70 %
 
 
 def _object_neuron(d_mode: str, pitch: float) -> tuple[float, float]:

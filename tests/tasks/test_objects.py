@@ -16,10 +16,8 @@ from somtorch.tasks.objects import (AreaConfig, ObjectArea, disparity_spread, fi
                                     select_areas, surround_pairs)
 
 ROWS, COLS, B = 4, 7, 5
-# conf/objects/paper.yaml: keep the nearest area, no size or contrast limits
 # the paper preset (conf/objects/paper.yaml): grid links, full-range spread, 10 % similarity, nearest area
-PAPER = dict(select="nearest", link="grid", spread="range",
-             similarity=0.1)
+PAPER = dict(rule="paper", similarity=0.1)
 
 
 def _block_map(ref: torch.Tensor, rows: int = ROWS, cols: int = COLS, b: int = B
@@ -129,7 +127,7 @@ def test_a_far_blob_on_a_near_background_has_negative_contrast_and_is_not_salien
     areas, stats = _blob_scene(blob_d=10.0, back_d=40.0)
     blob = next(a for a in areas if a.neurons == [1])
     assert blob.contrast == pytest.approx(-30.0)
-    kept = select_areas(areas, stats, AreaConfig(select="salient"))
+    kept = select_areas(areas, stats, AreaConfig())
     assert [a.neurons for a in kept] == [[0]]  # the blob recedes: what stands out is the near surround
 
 
@@ -214,25 +212,17 @@ def test_select_nearest_keeps_the_area_with_the_largest_mean_disparity():
     assert best.mean_disparity == max(a.mean_disparity for a in areas)
 
 
-def test_select_all_ranks_every_area_by_disparity():
-    ref = _three_plateaus()
-    cfg = AreaConfig(select="all", max_areas=5)
-    areas, stats = _areas(ref, cfg)
-    kept = select_areas(areas, stats, cfg)
-    assert [sorted(a.neurons) for a in kept] == [[0, 1, 2], [27], sorted(set(range(28)) - {0, 1, 2, 27})]
-    assert [a.rank for a in kept] == [0, 1, 2]
-    capped = dataclasses.replace(cfg, max_areas=1)
-    assert [sorted(a.neurons) for a in select_areas(areas, stats, capped)] == [[0, 1, 2]]
-
-
 def test_select_salient_ranks_by_contrast_and_drops_areas_behind_their_surroundings():
     ref = _three_plateaus()
-    cfg = AreaConfig(select="salient", max_areas=3, size_power=0.0)
+    cfg = AreaConfig(max_areas=3, size_power=0.0)
     areas, stats = _areas(ref, cfg)
     kept = select_areas(areas, stats, cfg)
     assert [sorted(a.neurons) for a in kept] == [[0, 1, 2], [27]]  # contrast 40 > 20; background < 0
+    assert [a.rank for a in kept] == [0, 1]
     assert kept[0].contrast > kept[1].contrast > 0
     assert any(a.contrast < 0 for a in areas)
+    capped = dataclasses.replace(cfg, max_areas=1)
+    assert [sorted(a.neurons) for a in select_areas(areas, stats, capped)] == [[0, 1, 2]]
 
 
 # ------------------------------------------------------------------------------ neuron_stats
@@ -284,7 +274,7 @@ def test_neuron_stats_rejects_bad_inputs():
 
 @pytest.mark.parametrize("kwargs", [
     {"similarity": 0.0}, {"similarity": -0.1}, {"similarity": float("nan")},
-    {"link": "diagonal"}, {"select": "bogus"}, {"max_areas": 0},
+    {"rule": "diagonal"}, {"rule": "nearest"}, {"max_areas": 0},
     {"size_power": -0.01},
     {"box_quantile": 0.5}, {"box_quantile": -0.01}, {"ground_clutter": -1.0}, {"merge": -0.5},
     {"merge": float("nan")}, {"min_purity": 1.5}, {"min_purity": -0.1},
@@ -296,9 +286,9 @@ def test_area_config_rejects_bad_values(kwargs):
         AreaConfig(**kwargs)
 
 
-def test_area_config_error_lists_the_valid_selections():
-    with pytest.raises(ValueError, match="all, nearest, salient"):
-        AreaConfig(select="largest")
+def test_area_config_error_lists_the_valid_rules():
+    with pytest.raises(ValueError, match="paper, salient"):
+        AreaConfig(rule="largest")
 
 
 def test_area_mask_is_the_union_of_its_segments():

@@ -156,11 +156,11 @@ def test_kept_areas_skips_a_speckle_area_whose_box_is_mostly_other_pixels():
     # without the test (min_purity 0, the paper's behaviour) the speckles are kept
     off = kept_areas(areas, stats, labels, AreaConfig(min_purity=0.0, min_solidity=0.0), ctx)
     assert [a.neurons for a in off] == [[2]] and off[0].purity < 0.05 and off[0].confidence == 1.0
-    # a single candidate allowed: nothing passes, so the best-ranked one is kept anyway ...
-    cfg = AreaConfig(max_areas=1, fail_safe=False)
+    # the paper's rule keeps its nearest area (the speckles) even where it fails the checks ...
+    cfg = AreaConfig(rule="paper")
     assert [a.neurons for a in kept_areas(areas, stats, labels, cfg, ctx)] == [[2]]
-    # ... or, fail-safe, nothing, and find_objects keeps the whole map and flags it
-    cfg = AreaConfig(max_areas=1, fail_safe=True)
+    # ... the salient rule, a single candidate allowed, nothing: find_objects keeps the whole map, flagged
+    cfg = AreaConfig(max_areas=1)
     assert kept_areas(areas, stats, labels, cfg, ctx) == []
     found = find_objects(labels, torch.tensor([10.0, 40.0, 90.0]), None, ctx, cfg)
     assert found.no_object and len(found.kept) == 1
