@@ -174,7 +174,8 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
                 planned = plan_jobs(context.config_loader, master, items, estimate_path)
             except BaseException:  # noqa: BLE001 - the launcher composes these itself and says why
                 planned = None
-            if not _send(conn, ("planned", pickle.dumps(planned)) if planned is not None else ("unplanned", None)):
+            reply = ("planned", pickle.dumps(planned)) if planned is not None else ("unplanned", None)
+            if not _send(conn, reply):
                 return
             continue
         config = pickle.loads(payload)
@@ -188,7 +189,7 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
         except BaseException as e:  # noqa: BLE001 - a signal outside the job's handler
             _send(conn, ("exit", 128 + int(getattr(e, "signum", signal.SIGINT))))
             return
-        if not _send(conn, ("done", pickle.dumps(_portable(ret)))):  # a signal while the result was on its way
+        if not _send(conn, ("done", pickle.dumps(_portable(ret)))):  # a signal while it was on its way
             return
 
 
