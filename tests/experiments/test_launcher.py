@@ -125,7 +125,6 @@ def test_a_signal_stops_every_worker_and_marks_their_folders(tmp_path, sig, code
     assert _wait_for(lambda: _group_gone(p.pid), 10), "a worker outlived the sweep"
 
 
-@pytest.mark.slow
 def test_a_signal_while_a_worker_sends_its_result_ends_the_worker_quietly():
     # CI once printed a worker's traceback: SIGTERM landed inside the write of a "done" message the
     # launcher was not reading (it was stopping). A blocked send, interrupted, must return False.
@@ -158,6 +157,7 @@ def test_a_signal_while_a_worker_sends_its_result_ends_the_worker_quietly():
     a.close()
 
 
+@pytest.mark.slow
 def test_a_bad_config_refuses_the_whole_sweep_before_any_job_runs(tmp_path):
     # train.epochs=0 fails the job's config rules: one line naming the job, status 2, nothing run
     code, err = _finished(tmp_path, *SMALL, "train.epochs=3,0", "hydra.launcher.n_jobs=2")
