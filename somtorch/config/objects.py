@@ -148,7 +148,7 @@ class AreaConfig(Validated):
     ground_clutter: float = 3.0
     drop_specks: bool = True
     merge: float = 0.75
-    min_purity: float = 0.25
+    min_purity: float = 0.15
     min_solidity: float = 0.25
     solidity_size: float = 0.02
     max_areas: int = 4
