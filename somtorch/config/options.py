@@ -8,8 +8,8 @@ from here, or a test checks that its registry matches), so validating a config i
 
 from __future__ import annotations
 
-__all__ = ["D_MODES", "DECAYS", "GROUND_RULES", "INITS", "METHODS", "MODES", "NEIGHBORHOODS", "NORMALIZATIONS", "OBJECT_RULES", "ORDERS",
-           "SYNTH_FAMILIES", "TOPOLOGIES", "register_method"]
+__all__ = ["D_MODES", "DECAYS", "GROUND_RULES", "INITS", "METHODS", "MODES", "NEIGHBORHOODS", "NORMALIZATIONS",
+           "OBJECT_RULES", "ORDERS", "SYNTH_FAMILIES", "TOPOLOGIES", "register_method"]
 
 # somtorch.core
 MODES = ("online", "batch", "minibatch")  # SOM.fit's update rules

@@ -15,12 +15,10 @@ near a threshold depend on the seed).
 That is the ``"position"`` rule (``GroundConfig.rule``): it recognises a floor by where a forward
 camera sees it. The ``"support"`` rule recognises it by what it supports, at any camera pitch — a
 floor filling the frame of a camera looking down, a table top, a slope: RANSAC on the whole map, no
-test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels
-(session 12 deleted a second test, that what stands on it comes in compact pieces: it changed no
-real frame and cost the synthetic ones, docs/tuned_constants.md). The position rule
-also wants nothing substantial behind the plane (``max_below_frac``: a floor hides what lies
-beneath it); a support-verified plane need not pass that test (a table top holding most of the
-view has the floor beyond its edges behind it). ``"either"`` accepts a plane that
+test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels.
+The position rule also wants nothing substantial behind the plane (``max_below_frac``: a floor
+hides what lies beneath it); a support-verified plane need not pass that test (a table top holding
+most of the view has the floor beyond its edges behind it). ``"either"`` accepts a plane that
 passes one of the two (RANSAC on the lower half, as the position rule).
 """
 
@@ -173,8 +171,8 @@ def _predict(coef: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:
 def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, oriented: torch.Tensor,
                     cfg: GroundConfig) -> torch.Tensor:
     """Which hypotheses ``coef`` ``(I, 3)`` pass the tests of ``cfg.rule`` on the sample ``q``
-    ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated). ``oriented`` ``(I,)``: the
-    hypotheses that pass the position rule's orientation test."""
+    ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated).
+    ``oriented`` ``(I,)``: the hypotheses that pass the position rule's orientation test."""
     pred = _predict(coef, q)  # (I, N)
     d = q[None, :, 2].float()
     inl = (pred - d).abs() < tol
