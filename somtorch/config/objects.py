@@ -73,6 +73,11 @@ class GroundConfig(Validated):
 
 
 # ------------------------------------------------------------------------------ step 1c: objects
+#: Depth continuity across a pixel pair: ``|Δd| ≤ max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC · d)``
+#: (``d`` the pair's mean), the step rule of issue 31's ``plane_components`` baseline (not tuned here).
+CONTINUITY_STEP_PX = 1.0
+CONTINUITY_STEP_FRAC = 0.05
+
 @dataclass
 class AreaConfig(Validated):
     """Object-area recognition (paper step 1c), see :mod:`somtorch.tasks.objects` and
@@ -96,6 +101,15 @@ class AreaConfig(Validated):
             than ``similarity ×`` the map's disparity spread.
         min_boundary: two segments touch if their common boundary is at least this share of the
             shorter of their two perimeters (``salient`` rule).
+        support_link: on a map whose ground plane the support test verified (it holds most of the
+            view: what is left stands on it), two touching segments also link where at least this
+            share of the pixel pairs along their common boundary is depth-continuous (``|Δd| ≤
+            max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC · d)``), if both stand above the ground
+            plane's clutter band (mean ``|d − plane|`` > ``ground_clutter ×`` the band: left-over
+            floor chains everything) and each lies in one image island of the segmented pixels
+            (its island holding ``box_coverage`` of its pixels: a segment straddling two objects
+            chains them). A staircase, a ramp or an arm is continuous at every segment boundary
+            while its segments' mean disparities differ step by step (``salient`` rule; 0 = off).
 
     Selection — which areas are kept (``salient`` rule):
         size_power: weight of the area's size in the ranking (0 = contrast alone).
@@ -136,6 +150,7 @@ class AreaConfig(Validated):
         "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION,
         "min_solidity": FRACTION, "solidity_size": Interval(0, 0.5, open_lo=True),
         "max_areas": POSITIVE_INT, "keep_budget": Interval(0, 1, open_lo=True),
+        "support_link": FRACTION,
     }
 
     rule: str = "salient"
@@ -143,7 +158,7 @@ class AreaConfig(Validated):
     min_boundary: float = 0.1
     size_power: float = 0.25
     map_stride: int = 2
-    box_coverage: float = 0.99
+    box_coverage: float = 0.95
     box_quantile: float = 0.001
     ground_clutter: float = 3.0
     drop_specks: bool = True
@@ -153,3 +168,4 @@ class AreaConfig(Validated):
     solidity_size: float = 0.02
     max_areas: int = 4
     keep_budget: float = 0.3
+    support_link: float = 0.8

@@ -26,7 +26,7 @@ from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_are
 from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, _square, box_purity, map_solidity, merge_adjacent, refine_box
 
-__all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "rank_score"]
+__all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "linkable_segments", "rank_score"]
 
 
 @dataclass
@@ -44,6 +44,9 @@ class MapContext:
         clutter_band: ``ground_clutter ×`` the plane's inlier band, px (0 without a plane).
         surround: :func:`~somtorch.tasks.objects.surround_pairs` of the map, or None (contrast
             against the segments alone).
+        islands: where the ground plane was verified by what it supports and ``support_link`` is on,
+            the 8-connected components of the segmented pixels ``(H, W)`` long (0 outside them);
+            else None (no continuity link on this map).
     """
 
     disparity: torch.Tensor
@@ -55,6 +58,7 @@ class MapContext:
     ground_residual: torch.Tensor | None
     clutter_band: float
     surround: tuple[torch.Tensor, torch.Tensor] | None = None
+    islands: torch.Tensor | None = None
 
     @classmethod
     def build(cls, disparity: torch.Tensor, valid: torch.Tensor, segmented: torch.Tensor,
@@ -66,8 +70,44 @@ class MapContext:
             residual = (disparity - ground.disparity(h, w)).abs()
             band = cfg.ground_clutter * ground.tol
         lab = torch.where(segmented, 0, -1)
+        islands = None
+        if ground is not None and ground.support and cfg.support_link > 0 and cfg.rule != "paper":
+            islands = _islands(segmented)
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
-                   map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity))
+                   map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity), islands)
+
+
+def _islands(segmented: torch.Tensor) -> torch.Tensor:
+    """8-connected components of ``segmented`` ``(H, W)`` bool → labels ``(H, W)`` long (0 = not segmented)."""
+    import cv2
+    import numpy as np
+
+    _, lab = cv2.connectedComponents(segmented.cpu().numpy().astype(np.uint8), connectivity=8)
+    return torch.from_numpy(lab.astype(np.int64))
+
+
+def linkable_segments(labels: torch.Tensor, stats: NeuronStats, ctx: MapContext, cfg: AreaConfig) -> torch.Tensor:
+    """The segments that may link by depth continuity (``AreaConfig.support_link``) ``(K,)`` bool:
+    those standing above the ground plane's clutter band (mean ``|d − plane|`` over ``ctx.clutter_band``;
+    every segment where there is no residual) that lie in one island (``ctx.islands``) of the
+    segmented pixels, the island holding at least ``cfg.box_coverage`` of their pixels.
+
+    Shape:
+        ``labels`` ``(H, W)`` long (−1 not segmented).
+    """
+    k = int(stats.count.shape[0])
+    seg = labels >= 0
+    lab = torch.where(seg, labels, k).view(-1)
+    ok = torch.ones(k, dtype=torch.bool)
+    if ctx.ground_residual is not None:
+        res = torch.bincount(lab, weights=ctx.ground_residual.reshape(-1).double(), minlength=k + 1)[:k]
+        ok &= res > ctx.clutter_band * stats.count  # left-over ground pixels chain everything they touch
+    isl = ctx.islands
+    n_isl = int(isl.max()) + 1
+    keys = (labels * n_isl + isl)[seg]  # (segment, island) of every segmented pixel
+    table = torch.bincount(keys, minlength=k * n_isl).view(k, n_isl)
+    ok &= table.amax(1).double() >= cfg.box_coverage * stats.count  # a straddling segment chains two objects
+    return ok
 
 
 @dataclass
@@ -89,9 +129,14 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
         ``grid_d2`` ``(K, K)`` or None.
     """
     cfg = cfg or AreaConfig()
+    on_support = ctx.islands is not None  # a support-verified plane was cut: link by continuity too
     stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread,
-                         surround=ctx.surround)
-    areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
+                         surround=ctx.surround, continuity=on_support)
+    if on_support:
+        areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, continuous=cfg.support_link,
+                                  linkable=linkable_segments(labels, stats, ctx, cfg))
+    else:
+        areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     if kept:
         return ObjectResult(stats, areas, kept)

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import torch
 
 from ..config import AreaConfig
+from ..config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX
 from ..validation import check_tensor
 
 
@@ -56,6 +57,8 @@ class NeuronStats:
             (the removed ground plane) whose disparity lies below the segment's mean (the ground
             behind it) ``(K,)``, or None.
         ground_sum: the disparity of those neighbours, summed per segment ``(K,)``, or None.
+        continuous: of the pixel pairs in ``boundary``, those across which the disparity is
+            continuous (:func:`continuous_pairs`) ``(K, K)``, or None (not asked for).
         perimeter: boundary length of each segment with other segments ``(K,)``.
     """
 
@@ -67,6 +70,7 @@ class NeuronStats:
     d_robust: tuple[float, float]
     ground_count: torch.Tensor | None = None
     ground_sum: torch.Tensor | None = None
+    continuous: torch.Tensor | None = None
 
     @property
     def perimeter(self) -> torch.Tensor:
@@ -132,7 +136,8 @@ def disparity_spread(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[tupl
 
 def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int, *,
                  spread: tuple[tuple[float, float], tuple[float, float]] | None = None,
-                 surround: tuple[torch.Tensor, torch.Tensor] | None = None) -> NeuronStats:
+                 surround: tuple[torch.Tensor, torch.Tensor] | None = None,
+                 continuity: bool = False) -> NeuronStats:
     """Statistics of the segments of one label map.
 
     Every statistic comes from one pass over the map: bincounts on labels, on (row, label) and
@@ -143,6 +148,9 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
             (computed here otherwise).
         surround: :func:`surround_pairs` of the map (the same for every member): the segments'
             boundary with the unsegmented valid pixels (the ground) is counted too.
+        continuity: also count, per pair of segments, the boundary pixel pairs across which the
+            disparity is continuous (:attr:`NeuronStats.continuous`; one more bincount on the
+            same pair keys).
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 invalid), ``disparity`` ``(H, W)``.
@@ -169,9 +177,12 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     box[:, 1] = torch.where(rows, ar_h, h).amin(0)
     box[:, 2] = torch.where(cols, ar_w, -1).amax(0)
     box[:, 3] = torch.where(rows, ar_h, -1).amax(0)
-    pairs = []
-    for a, b in ((lab[:, :-1], lab[:, 1:]), (lab[:-1, :], lab[1:, :])):
+    pairs, smooth = [], []
+    for (a, b), (da, db) in zip(((lab[:, :-1], lab[:, 1:]), (lab[:-1, :], lab[1:, :])),
+                                ((disparity[:, :-1], disparity[:, 1:]), (disparity[:-1, :], disparity[1:, :]))):
         pairs.append((a * (k + 1) + b).reshape(-1))
+        if continuity:
+            smooth.append(continuous_pairs(da, db).reshape(-1))
     flat = torch.cat(pairs)  # (P,) pair keys: every 4-connected pixel pair, horizontal then vertical
 
     def symmetric(counts: torch.Tensor) -> torch.Tensor:
@@ -189,7 +200,20 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
         keys, d_out = keys[behind], d_out[behind]
         g_count = torch.bincount(keys, minlength=k).double()
         g_sum = torch.bincount(keys, weights=d_out, minlength=k).double()  # long when empty
-    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, g_count, g_sum)
+    cont = symmetric(torch.bincount(flat[torch.cat(smooth)], minlength=(k + 1) ** 2)) if continuity else None
+    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, g_count, g_sum, cont)
+
+
+def continuous_pairs(d_a: torch.Tensor, d_b: torch.Tensor) -> torch.Tensor:
+    """Whether the disparity is continuous across each pixel pair: ``|d_a − d_b| ≤
+    max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC · (d_a + d_b) / 2)`` (a surface running on, not an
+    occluding edge; the step rule of the ``plane_components`` baseline).
+
+    Shape:
+        ``d_a``, ``d_b`` any (equal) shape → bool of that shape.
+    """
+    da, db = d_a.double(), d_b.double()
+    return (da - db).abs() <= torch.clamp_min(0.5 * CONTINUITY_STEP_FRAC * (da + db), CONTINUITY_STEP_PX)
 
 
 def surround_pairs(segmented: torch.Tensor, valid: torch.Tensor, disparity: torch.Tensor
@@ -237,7 +261,8 @@ def _components(adj: torch.Tensor) -> list[list[int]]:
 
 
 def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None, stats: NeuronStats,
-                      cfg: AreaConfig | None = None) -> list[ObjectArea]:
+                      cfg: AreaConfig | None = None, *, continuous: float = 0.0,
+                      linkable: torch.Tensor | None = None) -> list[ObjectArea]:
     """All object areas of one SOM (connected components of similar, grid-adjacent neurons).
 
     Args:
@@ -247,6 +272,10 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
             image, whatever ``cfg.rule`` says.
         stats: :func:`neuron_stats` of the member's label map.
         cfg: recognition parameters.
+        continuous: touching segments (``salient`` rule) also link where at least this share of
+            their boundary's pixel pairs is continuous (:attr:`NeuronStats.continuous`; 0 = no
+            continuity link; the caller decides where it applies: ``AreaConfig.support_link``).
+        linkable: ``(K,)`` bool, the segments that may link by continuity (None = all).
 
     Returns:
         areas with at least one pixel, in no particular order (see :func:`select_areas`).
@@ -260,6 +289,13 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
     else:
         near = _touching(stats, cfg.min_boundary)
     adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
+    if continuous > 0 and not paper:
+        if stats.continuous is None:
+            raise ValueError("find_object_areas(continuous > 0) needs neuron_stats(..., continuity=True)")
+        cont = near & (stats.boundary > 0) & (stats.continuous >= continuous * stats.boundary)
+        if linkable is not None:
+            cont &= linkable[:, None] & linkable[None, :]
+        adj |= cont
     adj.fill_diagonal_(False)
     return areas_of(_components(adj), stats)
 

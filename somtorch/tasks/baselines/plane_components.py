@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ...config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX
 from .registry import Obstacle, map_arrays, register_task_baseline
 
 __all__ = ["PlaneComponentsParams", "plane_components_boxes", "plane_components_o3d_boxes", "support_plane"]
@@ -61,8 +62,8 @@ class PlaneComponentsParams:
     plane_min_share: float = 0.20
     band_px: float = 0.5
     band_frac: float = 0.01
-    step_px: float = 1.0
-    step_frac: float = 0.05
+    step_px: float = CONTINUITY_STEP_PX  # the object step's depth-continuity rule is this one
+    step_frac: float = CONTINUITY_STEP_FRAC
     min_share: float = 0.005
     ransac_iters: int = 256
     ransac_sample: int = 20_000

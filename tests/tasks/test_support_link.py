@@ -1,0 +1,135 @@
+"""The depth-continuity link of step 1c (``objects.support_link``) on hand-built maps.
+
+On a map whose ground plane the support test verified, touching segments also link where their
+common boundary is depth-continuous, if both stand above the plane's clutter band and each lies in
+one image island of the segmented pixels (``somtorch.tasks.detect.linkable_segments``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+
+from somtorch.config import AreaConfig
+from somtorch.config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX
+from somtorch.tasks.baselines.plane_components import PlaneComponentsParams
+from somtorch.tasks.detect import MapContext, find_objects, linkable_segments
+from somtorch.tasks.ground import GroundPlane
+from somtorch.tasks.objects import continuous_pairs, neuron_stats
+
+H, W, FLOOR_D = 60, 80, 5.0
+
+
+def test_continuous_pair_counts_match_a_pixel_by_pixel_reference():
+    g = torch.Generator().manual_seed(5)
+    h, w, k = 15, 19, 5
+    labels = torch.where(torch.rand(h, w, generator=g) > 0.1, torch.randint(0, k, (h, w), generator=g), -1)
+    disp = 10 + torch.randint(0, 4, (h, w), generator=g).double() * 0.6  # steps of 0, 0.6 … 1.8 px
+    stats = neuron_stats(labels, disp, k, continuity=True)
+    want = torch.zeros(k, k, dtype=torch.float64)
+    for y in range(h):
+        for x in range(w):
+            for yy, xx in ((y, x + 1), (y + 1, x)):
+                if yy >= h or xx >= w:
+                    continue
+                a, b = int(labels[y, x]), int(labels[yy, xx])
+                da, db = float(disp[y, x]), float(disp[yy, xx])
+                if a >= 0 and b >= 0 and a != b and abs(da - db) <= max(1.0, 0.05 * (da + db) / 2):
+                    want[a, b] += 1
+                    want[b, a] += 1
+    assert torch.equal(stats.continuous, want)
+    assert bool((stats.continuous <= stats.boundary).all())
+    assert neuron_stats(labels, disp, k).continuous is None  # only when asked for
+
+
+def test_the_continuity_rule_is_the_baselines_step_rule_declared_once():
+    p = PlaneComponentsParams()
+    assert (p.step_px, p.step_frac) == (CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC)
+    d = torch.tensor([100.0, 100.0, 10.0, 10.0])
+    e = torch.tensor([104.9, 105.3, 11.0, 11.1])  # 5 % of the mean: 5.12 and 5.13 px; at 10 px the 1 px floor
+    assert continuous_pairs(d, e).tolist() == [True, False, True, False]
+
+
+def _staircase(steps: int = 4, rows: int = 5):
+    """A ramp of ``steps`` segments (``rows`` rows each, disparity rising 1 px a row, so continuous at
+    every boundary while the segments' means differ by ``rows`` px) on a floor that holds the rest
+    of the map (not segmented, far behind)."""
+    labels = torch.full((H, W), -1, dtype=torch.long)
+    for i in range(steps):
+        labels[20 + i * rows: 20 + (i + 1) * rows, 20:60] = i
+    return labels, _ramp_disparity(labels)
+
+
+def _ramp_disparity(labels: torch.Tensor) -> torch.Tensor:
+    disp = torch.full((H, W), FLOOR_D, dtype=torch.float64)
+    ys = torch.arange(H, dtype=torch.float64)[:, None].expand(H, W)
+    on = labels >= 0
+    disp[on] = 20.0 + (ys[on] - 20)
+    return disp
+
+
+def _run(labels, disp, cfg: AreaConfig, support: bool = True):
+    valid = torch.ones(H, W, dtype=torch.bool)
+    segmented = labels >= 0
+    ground = GroundPlane(0.0, 0.0, FLOOR_D, 0.5, valid & ~segmented, float((~segmented).float().mean()), support)
+    ctx = MapContext.build(disp, valid, segmented, ground, cfg)
+    k = int(labels.max()) + 1
+    ref = torch.stack([disp[labels == n].mean() for n in range(k)])
+    return find_objects(labels, ref.float(), None, ctx, cfg), ctx
+
+
+def _groups(result) -> set[frozenset[int]]:
+    return {frozenset(a.neurons) for a in result.areas}
+
+
+def test_a_ramp_on_a_support_verified_floor_is_one_area_not_one_per_step():
+    labels, disp = _staircase()
+    cfg = AreaConfig()
+    assert cfg.support_link > 0
+    linked, ctx = _run(labels, disp, cfg)
+    assert _groups(linked) == {frozenset({0, 1, 2, 3})}
+    assert linked.kept[0].box == (20, 20, 59, 39)  # the whole ramp is kept
+    # the steps' mean disparities differ by 5 px, far beyond the similarity tolerance: without the
+    # continuity link, or where the plane was not verified by what it supports, each is its own area
+    off, _ = _run(labels, disp, dataclasses.replace(cfg, support_link=0.0))
+    assert _groups(off) == {frozenset({i}) for i in range(4)}
+    forward, ctx_fwd = _run(labels, disp, cfg, support=False)
+    assert _groups(forward) == {frozenset({i}) for i in range(4)} and ctx_fwd.islands is None
+
+
+def test_an_occluding_edge_does_not_link():
+    labels, disp = _staircase()
+    disp[labels >= 2] += 6.0  # a step of 7 px at the 1–2 boundary (an occluding edge), 1 px at 2–3
+    result, _ = _run(labels, disp, AreaConfig())
+    assert _groups(result) == {frozenset({0, 1}), frozenset({2, 3})}
+
+
+def test_segments_straddling_two_islands_or_lying_on_the_floor_do_not_link_by_continuity():
+    # two ramps side by side, split by a column of floor (two image islands), and one segment (6)
+    # across the top of both: continuous with the top step of each ramp
+    labels = torch.full((H, W), -1, dtype=torch.long)
+    for i in range(3):
+        labels[25 + 5 * i: 30 + 5 * i, 20:40] = i
+        labels[25 + 5 * i: 30 + 5 * i, 41:60] = 3 + i
+    labels[20:25, 20:60] = 6
+    labels[:, 40] = -1
+    disp = _ramp_disparity(labels)
+    cfg = AreaConfig()
+    result, ctx = _run(labels, disp, cfg)
+    ok = linkable_segments(labels, neuron_stats(labels, disp, 7, continuity=True), ctx, cfg)
+    assert ok.tolist() == [True] * 6 + [False]  # half of neuron 6 lies in each island
+    assert _groups(result) == {frozenset({0, 1, 2}), frozenset({3, 4, 5}), frozenset({6})}  # not chained
+    # a segment within the clutter band of the plane (left-over floor) may not link either
+    low_labels, low_disp = _staircase()
+    low_disp[low_labels == 0] = FLOOR_D + 1.0  # 1 px above the floor: inside 3 × the 0.5 px band
+    _, low_ctx = _run(low_labels, low_disp, cfg)
+    low = linkable_segments(low_labels, neuron_stats(low_labels, low_disp, 4, continuity=True), low_ctx, cfg)
+    assert low.tolist() == [False, True, True, True]
+
+
+def test_the_paper_rule_never_links_by_continuity():
+    labels, disp = _staircase()
+    cfg = dataclasses.replace(AreaConfig(), rule="paper", similarity=0.1)
+    _, ctx = _run(labels, disp, cfg)
+    assert ctx.islands is None
