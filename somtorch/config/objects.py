@@ -158,7 +158,7 @@ class AreaConfig(Validated):
     min_boundary: float = 0.1
     size_power: float = 0.25
     map_stride: int = 2
-    box_coverage: float = 0.95
+    box_coverage: float = 0.99
     box_quantile: float = 0.001
     ground_clutter: float = 3.0
     drop_specks: bool = True
