@@ -205,6 +205,8 @@ def _decode(path: Path) -> np.ndarray:
         img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     except cv2.error as e:
         raise DataFileError(path, f"OpenCV cannot decode this image: {str(e).strip().splitlines()[-1]}") from None
+    except OSError as e:  # OpenCV 5's TIFF decoder raises some libtiff failures as a bare errno
+        raise DataFileError(path, f"OpenCV cannot decode this image: {e.strerror or e}") from None
     if img is None:
         raise DataFileError(path, "OpenCV cannot decode this file as an image (corrupt, empty or not an "
                                   "image format)")
