@@ -172,9 +172,9 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
             master, estimate_path, items = pickle.loads(payload)
             try:
                 planned = plan_jobs(context.config_loader, master, items, estimate_path)
+                reply = ("planned", pickle.dumps(planned)) if planned is not None else ("unplanned", None)
             except BaseException:  # noqa: BLE001 - the launcher composes these itself and says why
-                planned = None
-            reply = ("planned", pickle.dumps(planned)) if planned is not None else ("unplanned", None)
+                reply = ("unplanned", None)
             if not _send(conn, reply):
                 return
             continue
@@ -189,7 +189,11 @@ def _serve(conn: Any, task: tuple[str, str], loader: bytes, state: bytes) -> Non
         except BaseException as e:  # noqa: BLE001 - a signal outside the job's handler
             _send(conn, ("exit", 128 + int(getattr(e, "signum", signal.SIGINT))))
             return
-        if not _send(conn, ("done", pickle.dumps(_portable(ret)))):  # a signal while it was on its way
+        try:  # packing a large result takes a while: a SIGTERM may land here as well as in _send
+            done = ("done", pickle.dumps(_portable(ret)))
+        except BaseException:  # noqa: BLE001 - a signal while it was packed: the launcher counts the job lost
+            return
+        if not _send(conn, done):  # a signal while it was on its way
             return
 
 
