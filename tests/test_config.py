@@ -11,7 +11,7 @@ from omegaconf import OmegaConf
 
 from experiments.schema import register
 from somtorch.config import (AreaConfig, FeatureConfig, GroundConfig, PipelineConfig, ReductionConfig, TrainConfig,
-                             with_overrides)
+                             WarmStartConfig, with_overrides)
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 register()
@@ -63,8 +63,7 @@ def test_the_paper_preset_pins_every_value_that_differs_from_the_default():
     assert paper.ground.rule == "none"
     o = paper.objects
     assert (o.rule, o.similarity, o.merge, o.min_purity, o.min_solidity) == ("paper", 0.1, 0.0, 0.0, 0.0)
-    assert (o.box_coverage, o.box_quantile, o.ground_clutter, o.drop_specks, o.map_stride) == \
-        (1.0, 0.0, 0.0, False, 1)
+    assert (o.box_coverage, o.box_quantile, o.ground_clutter, o.map_stride) == (1.0, 0.0, 0.0, 1)
     r = paper.reduction
     assert (r.tolerance_px, r.tolerance_frac, r.tolerance_image) == (0, 0.05, 0.0)
 
@@ -90,8 +89,8 @@ def test_the_constraints_table_names_the_field_and_the_expectation(cls, kwargs, 
 def test_wrong_types_are_type_errors_and_overrides_are_validated():
     with pytest.raises(TypeError, match="train.epochs"):
         TrainConfig(epochs=2.5)
-    with pytest.raises(TypeError, match="objects.drop_specks"):
-        AreaConfig(drop_specks="yes")
+    with pytest.raises(TypeError, match="sequence.warm"):
+        WarmStartConfig(warm="yes")
     cfg = with_overrides(PipelineConfig(), {"objects.merge": 0.5, "ensemble": 3})
     assert (cfg.objects.merge, cfg.ensemble, PipelineConfig().objects.merge) == (0.5, 3, AreaConfig().merge)
     with pytest.raises(ValueError, match="not a field"):

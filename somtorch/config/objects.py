@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from . import options
-from .constraints import BOOL, FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, Validated
+from .constraints import FRACTION, NON_NEGATIVE, POSITIVE, POSITIVE_INT, Choice, Interval, Validated
 
 
 # ---------------------------------------------------------------------------------- ground plane
@@ -77,6 +77,10 @@ class GroundConfig(Validated):
 #: (``d`` the pair's mean), the step rule of issue 31's ``plane_components`` baseline (not tuned here).
 CONTINUITY_STEP_PX = 1.0
 CONTINUITY_STEP_FRAC = 0.05
+#: A common boundary of two segments is continuous when at least this share of its pixel pairs is
+#: (most of it: a definition, not a tuned value; the protocol found 0.5 and 0.8 alike, session 14).
+CONTINUOUS_SHARE = 0.5
+
 
 @dataclass
 class AreaConfig(Validated):
@@ -101,15 +105,16 @@ class AreaConfig(Validated):
             than ``similarity ×`` the map's disparity spread.
         min_boundary: two segments touch if their common boundary is at least this share of the
             shorter of their two perimeters (``salient`` rule).
-        support_link: on a map whose ground plane the support test verified (it holds most of the
-            view: what is left stands on it), two touching segments also link where at least this
-            share of the pixel pairs along their common boundary is depth-continuous (``|Δd| ≤
-            max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC · d)``), if both stand above the ground
-            plane's clutter band (mean ``|d − plane|`` > ``ground_clutter ×`` the band: left-over
-            floor chains everything) and each lies in one image island of the segmented pixels
-            (its island holding ``box_coverage`` of its pixels: a segment straddling two objects
-            chains them). A staircase, a ramp or an arm is continuous at every segment boundary
-            while its segments' mean disparities differ step by step (``salient`` rule; 0 = off).
+
+    On a map whose ground plane the support test verified (it holds most of the view: what is left
+    stands on it), two touching segments also link where their common boundary is continuous in
+    depth (``CONTINUOUS_SHARE`` of its pixel pairs step by ``|Δd| ≤ max(CONTINUITY_STEP_PX,
+    CONTINUITY_STEP_FRAC · d)``), if both stand above the ground plane's clutter band (mean ``|d −
+    plane|`` > ``ground_clutter ×`` the band: left-over floor chains everything) and each lies in
+    one image island of the segmented pixels (its island holding ``box_coverage`` of its pixels: a
+    segment straddling two objects chains them). A staircase, a ramp or an arm is continuous at
+    every segment boundary while its segments' mean disparities differ step by step (``salient``
+    rule only; no field: see ``docs/tuned_constants.md``).
 
     Selection — which areas are kept (``salient`` rule):
         size_power: weight of the area's size in the ranking (0 = contrast alone).
@@ -137,9 +142,10 @@ class AreaConfig(Validated):
         box_quantile: the box spans the ``q … 1 − q`` quantiles of the kept pixels' coordinates.
         ground_clutter: pieces lying within ``ground_clutter ×`` the ground plane's inlier band
             are left out of the box (0 = off).
-        drop_specks: image-connected pieces of the area without a solid 3 × 3 block (on the
-            refinement grid) are left out of its box: specks and sparse speckle bands at the
-            object's disparity stop stretching it.
+
+    Under the ``salient`` rule, image-connected pieces of an area without a solid 3 × 3 block (on
+    the refinement grid) are left out of its box as well: specks and sparse speckle bands at the
+    object's disparity stop stretching it (no field; the ``paper`` rule does not drop them).
     """
 
     _group: ClassVar[str] = "objects"
@@ -147,10 +153,9 @@ class AreaConfig(Validated):
         "rule": Choice(options.OBJECT_RULES), "similarity": POSITIVE, "min_boundary": NON_NEGATIVE,
         "size_power": NON_NEGATIVE, "map_stride": POSITIVE_INT,
         "box_coverage": Interval(0, 1, open_lo=True), "box_quantile": Interval(0, 0.5, open_hi=True),
-        "ground_clutter": NON_NEGATIVE, "drop_specks": BOOL, "merge": NON_NEGATIVE, "min_purity": FRACTION,
+        "ground_clutter": NON_NEGATIVE, "merge": NON_NEGATIVE, "min_purity": FRACTION,
         "min_solidity": FRACTION, "solidity_size": Interval(0, 0.5, open_lo=True),
         "max_areas": POSITIVE_INT, "keep_budget": Interval(0, 1, open_lo=True),
-        "support_link": FRACTION,
     }
 
     rule: str = "salient"
@@ -161,11 +166,9 @@ class AreaConfig(Validated):
     box_coverage: float = 0.99
     box_quantile: float = 0.001
     ground_clutter: float = 3.0
-    drop_specks: bool = True
     merge: float = 0.75
     min_purity: float = 0.15
     min_solidity: float = 0.25
     solidity_size: float = 0.02
     max_areas: int = 4
     keep_budget: float = 0.3
-    support_link: float = 0.8

@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 import torch
 
 from ..config import AreaConfig
+from ..config.objects import CONTINUOUS_SHARE
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
                       rank_score, select_areas, surround_pairs)
@@ -44,8 +45,8 @@ class MapContext:
         clutter_band: ``ground_clutter ×`` the plane's inlier band, px (0 without a plane).
         surround: :func:`~somtorch.tasks.objects.surround_pairs` of the map, or None (contrast
             against the segments alone).
-        islands: where the ground plane was verified by what it supports and ``support_link`` is on,
-            the 8-connected components of the segmented pixels ``(H, W)`` long (0 outside them);
+        islands: where the ground plane was verified by what it supports (``salient`` rule), the
+            8-connected components of the segmented pixels ``(H, W)`` long (0 outside them);
             else None (no continuity link on this map).
     """
 
@@ -71,7 +72,7 @@ class MapContext:
             band = cfg.ground_clutter * ground.tol
         lab = torch.where(segmented, 0, -1)
         islands = None
-        if ground is not None and ground.support and cfg.support_link > 0 and cfg.rule != "paper":
+        if ground is not None and ground.support and cfg.rule != "paper":
             islands = _islands(segmented)
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
                    map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity), islands)
@@ -87,7 +88,7 @@ def _islands(segmented: torch.Tensor) -> torch.Tensor:
 
 
 def linkable_segments(labels: torch.Tensor, stats: NeuronStats, ctx: MapContext, cfg: AreaConfig) -> torch.Tensor:
-    """The segments that may link by depth continuity (``AreaConfig.support_link``) ``(K,)`` bool:
+    """The segments that may link by depth continuity (see :class:`~somtorch.config.AreaConfig`) ``(K,)`` bool:
     those standing above the ground plane's clutter band (mean ``|d − plane|`` over ``ctx.clutter_band``;
     every segment where there is no residual) that lie in one island (``ctx.islands``) of the
     segmented pixels, the island holding at least ``cfg.box_coverage`` of their pixels.
@@ -133,7 +134,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
     stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread,
                          surround=ctx.surround, continuity=on_support)
     if on_support:
-        areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, continuous=cfg.support_link,
+        areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, continuous=CONTINUOUS_SHARE,
                                   linkable=linkable_segments(labels, stats, ctx, cfg))
     else:
         areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
@@ -185,7 +186,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         own = label_mask(labels, joined.neurons)  # refine_box moves the box, not the neurons
         done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
                           ground_residual=ctx.ground_residual, clutter_band=ctx.clutter_band,
-                          drop_specks=cfg.drop_specks, mask=own)
+                          drop_specks=cfg.rule != "paper", mask=own)
         solid = _opened_share(own, square)  # in [0, 1]: the opening keeps a subset of the pixels
         done = replace(done, purity=box_purity(done, labels, ctx.integral, own), solidity=solid,
                        solidity_rel=solid / ctx.solidity, confidence=confidence)

@@ -274,7 +274,7 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
         cfg: recognition parameters.
         continuous: touching segments (``salient`` rule) also link where at least this share of
             their boundary's pixel pairs is continuous (:attr:`NeuronStats.continuous`; 0 = no
-            continuity link; the caller decides where it applies: ``AreaConfig.support_link``).
+            continuity link; the caller decides where it applies: on support-verified maps, ``CONTINUOUS_SHARE``).
         linkable: ``(K,)`` bool, the segments that may link by continuity (None = all).
 
     Returns:

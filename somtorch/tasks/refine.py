@@ -86,7 +86,7 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
 def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.box_coverage,
                quantile: float = _D.box_quantile, ground_residual: torch.Tensor | None = None,
                clutter_band: float = 0.0,
-               drop_specks: bool = _D.drop_specks, mask: torch.Tensor | None = None) -> ObjectArea:
+               drop_specks: bool = True, mask: torch.Tensor | None = None) -> ObjectArea:
     """The box of the object inside a kept area, without the parts of its segments that are not it.
 
     The area's pixels are split into image-connected pieces (8-connectivity; the pipeline passes the

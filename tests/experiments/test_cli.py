@@ -37,7 +37,7 @@ def test_typos_are_named_with_the_nearest_key(args, expect):
 
 @pytest.mark.parametrize("args", [
     ["ensemble=3", "objects.similarity=0.1", "objects=paper", "data=kitti2015", "+preset=paper",
-     "hydra.run.dir=/tmp/x", "~objects.drop_specks", "++foo=1", "data.sgbm.numDisparities=64", "-m",
+     "hydra.run.dir=/tmp/x", "~output.maps", "++foo=1", "data.sgbm.numDisparities=64", "-m",
      "objects.similarity=0.01,0.05", "hydra/launcher=joblib", "train=online,batch"],
 ])
 def test_valid_overrides_pass(args):
@@ -136,7 +136,7 @@ def test_help_does_not_import_torch():  # what makes it instant (0.17 s here aga
 @pytest.mark.parametrize("args, expect", [
     (["train.epochs=abc"], "train.epochs=abc: expected an int"),
     (["objects.similarity=x"], "expected a float"),
-    (["objects.drop_specks=maybe"], "expected a bool"),
+    (["output.maps=maybe"], "expected a bool"),
     (["ensemble=2.5"], "ensemble=2.5: expected an int"),
     (["train.epochs=3,abc"], "train.epochs=abc"),  # each value of a sweep
 ])
@@ -147,7 +147,7 @@ def test_values_of_the_wrong_type_are_named(args, expect):
 
 def test_values_of_the_right_type_pass():
     assert check_overrides(["train.sigma=null", "train.sigma=2", "objects.similarity=1", "object_id=null",
-                            "objects.drop_specks=false", "train.epochs=range(1,4)"], RunConfig) is None
+                            "output.maps=false", "train.epochs=range(1,4)"], RunConfig) is None
 
 
 def test_the_suite_runs_without_plugin_warnings():

@@ -108,7 +108,7 @@ def _case(i: int, small, fields) -> None:
 def test_pipeline_survives_random_valid_configs(small):
     torch.manual_seed(0)
     fields = _fields()
-    assert {"objects.map_stride", "objects.drop_specks", "objects.keep_budget"} <= {k for k, _ in fields}
+    assert {"objects.map_stride", "objects.max_areas", "objects.keep_budget"} <= {k for k, _ in fields}
     for i in range(60):
         _case(i, small, fields)
 

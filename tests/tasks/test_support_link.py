@@ -1,4 +1,4 @@
-"""The depth-continuity link of step 1c (``objects.support_link``) on hand-built maps.
+"""The depth-continuity link of step 1c (``CONTINUOUS_SHARE``) on hand-built maps.
 
 On a map whose ground plane the support test verified, touching segments also link where their
 common boundary is depth-continuous, if both stand above the plane's clutter band and each lies in
@@ -12,11 +12,11 @@ import dataclasses
 import torch
 
 from somtorch.config import AreaConfig
-from somtorch.config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX
+from somtorch.config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX, CONTINUOUS_SHARE
 from somtorch.tasks.baselines.plane_components import PlaneComponentsParams
 from somtorch.tasks.detect import MapContext, find_objects, linkable_segments
 from somtorch.tasks.ground import GroundPlane
-from somtorch.tasks.objects import continuous_pairs, neuron_stats
+from somtorch.tasks.objects import continuous_pairs, find_object_areas, neuron_stats
 
 H, W, FLOOR_D = 60, 80, 5.0
 
@@ -86,14 +86,15 @@ def _groups(result) -> set[frozenset[int]]:
 def test_a_ramp_on_a_support_verified_floor_is_one_area_not_one_per_step():
     labels, disp = _staircase()
     cfg = AreaConfig()
-    assert cfg.support_link > 0
     linked, ctx = _run(labels, disp, cfg)
     assert _groups(linked) == {frozenset({0, 1, 2, 3})}
     assert linked.kept[0].box == (20, 20, 59, 39)  # the whole ramp is kept
     # the steps' mean disparities differ by 5 px, far beyond the similarity tolerance: without the
     # continuity link, or where the plane was not verified by what it supports, each is its own area
-    off, _ = _run(labels, disp, dataclasses.replace(cfg, support_link=0.0))
-    assert _groups(off) == {frozenset({i}) for i in range(4)}
+    stats = neuron_stats(labels, disp, 4, continuity=True)
+    ref = torch.stack([disp[labels == n].mean() for n in range(4)])
+    off = find_object_areas(ref, None, stats, cfg)
+    assert {frozenset(a.neurons) for a in off} == {frozenset({i}) for i in range(4)}
     forward, ctx_fwd = _run(labels, disp, cfg, support=False)
     assert _groups(forward) == {frozenset({i}) for i in range(4)} and ctx_fwd.islands is None
 
@@ -133,3 +134,20 @@ def test_the_paper_rule_never_links_by_continuity():
     cfg = dataclasses.replace(AreaConfig(), rule="paper", similarity=0.1)
     _, ctx = _run(labels, disp, cfg)
     assert ctx.islands is None
+
+
+def test_a_boundary_is_continuous_when_most_of_its_pixel_pairs_are():
+    # two segments side by side on a support-verified floor; the top rows of segment 1 step away
+    # from segment 0 by 8 px (an occluding edge), the bottom rows run on: the share of continuous
+    # pairs along their common boundary decides the link, at CONTINUOUS_SHARE
+    for rows_continuous, linked in ((12, True), (8, False)):
+        labels = torch.full((H, W), -1, dtype=torch.long)
+        labels[20:40, 20:40], labels[20:40, 40:60] = 0, 1
+        disp = torch.full((H, W), FLOOR_D, dtype=torch.float64)
+        disp[20:40, 20:40] = 20.0
+        disp[20:40, 40:60] = 20.5 + 8.0  # dissimilar means: no similarity link
+        disp[40 - rows_continuous:40, 40:60] = 20.5
+        share = rows_continuous / 20
+        assert (share >= CONTINUOUS_SHARE) == linked
+        result, _ = _run(labels, disp, AreaConfig())
+        assert (frozenset({0, 1}) in _groups(result)) == linked, share
