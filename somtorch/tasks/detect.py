@@ -23,7 +23,7 @@ from ..config import AreaConfig
 from ..config.objects import CONTINUOUS_SHARE
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
-                      rank_score, select_areas, surround_pairs)
+                      pair_continuity, rank_score, select_areas, surround_pairs)
 from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, _square, box_purity, map_solidity, merge_adjacent, refine_box
 
@@ -48,6 +48,8 @@ class MapContext:
         islands: where the ground plane was verified by what it supports (``salient`` rule), the
             8-connected components of the segmented pixels ``(H, W)`` long (0 outside them);
             else None (no continuity link on this map).
+        continuity: where ``islands`` is set, :func:`~somtorch.tasks.objects.pair_continuity` of
+            the map (whether each 4-connected pixel pair is continuous in depth); else None.
     """
 
     disparity: torch.Tensor
@@ -60,6 +62,7 @@ class MapContext:
     clutter_band: float
     surround: tuple[torch.Tensor, torch.Tensor] | None = None
     islands: torch.Tensor | None = None
+    continuity: torch.Tensor | None = None
 
     @classmethod
     def build(cls, disparity: torch.Tensor, valid: torch.Tensor, segmented: torch.Tensor,
@@ -71,11 +74,12 @@ class MapContext:
             residual = (disparity - ground.disparity(h, w)).abs()
             band = cfg.ground_clutter * ground.tol
         lab = torch.where(segmented, 0, -1)
-        islands = None
+        islands = continuity = None
         if ground is not None and ground.support and cfg.rule != "paper":
-            islands = _islands(segmented)
+            islands, continuity = _islands(segmented), pair_continuity(disparity)
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
-                   map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity), islands)
+                   map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity), islands,
+                   continuity)
 
 
 def _islands(segmented: torch.Tensor) -> torch.Tensor:
@@ -132,7 +136,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
     cfg = cfg or AreaConfig()
     on_support = ctx.islands is not None  # a support-verified plane was cut: link by continuity too
     stats = neuron_stats(labels, ctx.disparity, int(ref_disparity.shape[-1]), spread=ctx.spread,
-                         surround=ctx.surround, continuity=on_support)
+                         surround=ctx.surround, continuity=ctx.continuity)
     if on_support:
         areas = find_object_areas(ref_disparity, grid_d2, stats, cfg, continuous=CONTINUOUS_SHARE,
                                   linkable=linkable_segments(labels, stats, ctx, cfg))

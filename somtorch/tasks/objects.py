@@ -137,7 +137,7 @@ def disparity_spread(disparity: torch.Tensor, valid: torch.Tensor) -> tuple[tupl
 def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int, *,
                  spread: tuple[tuple[float, float], tuple[float, float]] | None = None,
                  surround: tuple[torch.Tensor, torch.Tensor] | None = None,
-                 continuity: bool = False) -> NeuronStats:
+                 continuity: torch.Tensor | None = None) -> NeuronStats:
     """Statistics of the segments of one label map.
 
     Every statistic comes from one pass over the map: bincounts on labels, on (row, label) and
@@ -148,9 +148,9 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
             (computed here otherwise).
         surround: :func:`surround_pairs` of the map (the same for every member): the segments'
             boundary with the unsegmented valid pixels (the ground) is counted too.
-        continuity: also count, per pair of segments, the boundary pixel pairs across which the
-            disparity is continuous (:attr:`NeuronStats.continuous`; one more bincount on the
-            same pair keys).
+        continuity: :func:`pair_continuity` of ``disparity`` (the same for every member): also
+            count, per pair of segments, the boundary pixel pairs across which the disparity is
+            continuous (:attr:`NeuronStats.continuous`; one more bincount on the same pair keys).
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 invalid), ``disparity`` ``(H, W)``.
@@ -177,12 +177,7 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     box[:, 1] = torch.where(rows, ar_h, h).amin(0)
     box[:, 2] = torch.where(cols, ar_w, -1).amax(0)
     box[:, 3] = torch.where(rows, ar_h, -1).amax(0)
-    pairs, smooth = [], []
-    for (a, b), (da, db) in zip(((lab[:, :-1], lab[:, 1:]), (lab[:-1, :], lab[1:, :])),
-                                ((disparity[:, :-1], disparity[:, 1:]), (disparity[:-1, :], disparity[1:, :]))):
-        pairs.append((a * (k + 1) + b).reshape(-1))
-        if continuity:
-            smooth.append(continuous_pairs(da, db).reshape(-1))
+    pairs = [(a * (k + 1) + b).reshape(-1) for a, b in ((lab[:, :-1], lab[:, 1:]), (lab[:-1, :], lab[1:, :]))]
     flat = torch.cat(pairs)  # (P,) pair keys: every 4-connected pixel pair, horizontal then vertical
 
     def symmetric(counts: torch.Tensor) -> torch.Tensor:
@@ -200,8 +195,24 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
         keys, d_out = keys[behind], d_out[behind]
         g_count = torch.bincount(keys, minlength=k).double()
         g_sum = torch.bincount(keys, weights=d_out, minlength=k).double()  # long when empty
-    cont = symmetric(torch.bincount(flat[torch.cat(smooth)], minlength=(k + 1) ** 2)) if continuity else None
+    cont = None
+    if continuity is not None:
+        if continuity.shape != flat.shape:
+            raise ValueError(f"continuity {tuple(continuity.shape)} is not pair_continuity() of a {h}×{w} map")
+        cont = symmetric(torch.bincount(flat[continuity], minlength=(k + 1) ** 2))
     return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, g_count, g_sum, cont)
+
+
+def pair_continuity(disparity: torch.Tensor) -> torch.Tensor:
+    """Whether the disparity is continuous (:func:`continuous_pairs`) across each 4-connected pixel
+    pair of a map, in :func:`neuron_stats`' pair order (horizontal pairs row by row, then vertical).
+    It depends on the map alone, so every member of an ensemble shares it.
+
+    Shape:
+        ``disparity`` ``(H, W)`` → ``(H·(W−1) + (H−1)·W,)`` bool.
+    """
+    return torch.cat([continuous_pairs(disparity[:, :-1], disparity[:, 1:]).reshape(-1),
+                      continuous_pairs(disparity[:-1, :], disparity[1:, :]).reshape(-1)])
 
 
 def continuous_pairs(d_a: torch.Tensor, d_b: torch.Tensor) -> torch.Tensor:
@@ -291,7 +302,7 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
     adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
     if continuous > 0 and not paper:
         if stats.continuous is None:
-            raise ValueError("find_object_areas(continuous > 0) needs neuron_stats(..., continuity=True)")
+            raise ValueError("find_object_areas(continuous > 0) needs neuron_stats(..., continuity=pair_continuity(d))")
         cont = near & (stats.boundary > 0) & (stats.continuous >= continuous * stats.boundary)
         if linkable is not None:
             cont &= linkable[:, None] & linkable[None, :]

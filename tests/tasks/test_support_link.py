@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import pytest
 import torch
 
 from somtorch.config import AreaConfig
@@ -16,7 +17,7 @@ from somtorch.config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX, CO
 from somtorch.tasks.baselines.plane_components import PlaneComponentsParams
 from somtorch.tasks.detect import MapContext, find_objects, linkable_segments
 from somtorch.tasks.ground import GroundPlane
-from somtorch.tasks.objects import continuous_pairs, find_object_areas, neuron_stats
+from somtorch.tasks.objects import continuous_pairs, find_object_areas, neuron_stats, pair_continuity
 
 H, W, FLOOR_D = 60, 80, 5.0
 
@@ -26,7 +27,7 @@ def test_continuous_pair_counts_match_a_pixel_by_pixel_reference():
     h, w, k = 15, 19, 5
     labels = torch.where(torch.rand(h, w, generator=g) > 0.1, torch.randint(0, k, (h, w), generator=g), -1)
     disp = 10 + torch.randint(0, 4, (h, w), generator=g).double() * 0.6  # steps of 0, 0.6 … 1.8 px
-    stats = neuron_stats(labels, disp, k, continuity=True)
+    stats = neuron_stats(labels, disp, k, continuity=pair_continuity(disp))
     want = torch.zeros(k, k, dtype=torch.float64)
     for y in range(h):
         for x in range(w):
@@ -41,6 +42,9 @@ def test_continuous_pair_counts_match_a_pixel_by_pixel_reference():
     assert torch.equal(stats.continuous, want)
     assert bool((stats.continuous <= stats.boundary).all())
     assert neuron_stats(labels, disp, k).continuous is None  # only when asked for
+    assert pair_continuity(disp).shape == (h * (w - 1) + (h - 1) * w,)
+    with pytest.raises(ValueError, match="pair_continuity"):
+        neuron_stats(labels, disp, k, continuity=pair_continuity(disp[:, 1:]))
 
 
 def test_the_continuity_rule_is_the_baselines_step_rule_declared_once():
@@ -91,7 +95,7 @@ def test_a_ramp_on_a_support_verified_floor_is_one_area_not_one_per_step():
     assert linked.kept[0].box == (20, 20, 59, 39)  # the whole ramp is kept
     # the steps' mean disparities differ by 5 px, far beyond the similarity tolerance: without the
     # continuity link, or where the plane was not verified by what it supports, each is its own area
-    stats = neuron_stats(labels, disp, 4, continuity=True)
+    stats = neuron_stats(labels, disp, 4, continuity=pair_continuity(disp))
     ref = torch.stack([disp[labels == n].mean() for n in range(4)])
     off = find_object_areas(ref, None, stats, cfg)
     assert {frozenset(a.neurons) for a in off} == {frozenset({i}) for i in range(4)}
@@ -118,14 +122,14 @@ def test_segments_straddling_two_islands_or_lying_on_the_floor_do_not_link_by_co
     disp = _ramp_disparity(labels)
     cfg = AreaConfig()
     result, ctx = _run(labels, disp, cfg)
-    ok = linkable_segments(labels, neuron_stats(labels, disp, 7, continuity=True), ctx, cfg)
+    ok = linkable_segments(labels, neuron_stats(labels, disp, 7, continuity=pair_continuity(disp)), ctx, cfg)
     assert ok.tolist() == [True] * 6 + [False]  # half of neuron 6 lies in each island
     assert _groups(result) == {frozenset({0, 1, 2}), frozenset({3, 4, 5}), frozenset({6})}  # not chained
     # a segment within the clutter band of the plane (left-over floor) may not link either
     low_labels, low_disp = _staircase()
     low_disp[low_labels == 0] = FLOOR_D + 1.0  # 1 px above the floor: inside 3 × the 0.5 px band
     _, low_ctx = _run(low_labels, low_disp, cfg)
-    low = linkable_segments(low_labels, neuron_stats(low_labels, low_disp, 4, continuity=True), low_ctx, cfg)
+    low = linkable_segments(low_labels, neuron_stats(low_labels, low_disp, 4, continuity=pair_continuity(low_disp)), low_ctx, cfg)
     assert low.tolist() == [False, True, True, True]
 
 
