@@ -153,6 +153,20 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
     return ObjectResult(stats, areas, [whole], no_object=True)
 
 
+def _window(box: tuple[int, int, int, int], shape: tuple[int, ...], margin: int
+            ) -> tuple[tuple[slice, slice], tuple[int, int]]:
+    """The ``(rows, cols)`` slices of ``box`` (x0, y0, x1, y1, inclusive) widened by ``margin`` px and
+    clipped to a map of ``shape`` ``(H, W)``, and the window's top-left ``(x, y)``."""
+    h, w = shape[-2:]
+    x0, y0 = max(box[0] - margin, 0), max(box[1] - margin, 0)
+    x1, y1 = min(box[2] + margin, w - 1), min(box[3] + margin, h - 1)
+    return (slice(y0, y1 + 1), slice(x0, x1 + 1)), (x0, y0)
+
+
+def _shift(box: tuple[int, int, int, int], dx: int, dy: int) -> tuple[int, int, int, int]:
+    return box[0] + dx, box[1] + dy, box[2] + dx, box[3] + dy
+
+
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
                ctx: MapContext) -> list[ObjectArea]:
     """Select, join, refine and check the candidates in rank order.
@@ -187,12 +201,19 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         confidence = rank_score(cand, cfg) / best if best > 0 else 1.0
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
                                 exclude=taken)[0]
-        own = label_mask(labels, joined.neurons)  # refine_box moves the box, not the neurons
-        done = refine_box(joined, labels, coverage=cfg.box_coverage, quantile=cfg.box_quantile,
-                          ground_residual=ctx.ground_residual, clutter_band=ctx.clutter_band,
-                          drop_specks=cfg.rule != "paper", mask=own)
+        # every check reads the window of the area's segments (their box, widened by half the
+        # opening's square where the map goes on), not the whole map: the same result
+        win, origin = _window(joined.box, labels.shape, square // 2 + 1)
+        own = label_mask(labels[win], joined.neurons)  # refine_box moves the box, not the neurons
+        x0, y0 = origin
+        local = replace(joined, box=_shift(joined.box, -x0, -y0), segment_box=None)
+        done = refine_box(local, labels[win], coverage=cfg.box_coverage, quantile=cfg.box_quantile,
+                          ground_residual=None if ctx.ground_residual is None else ctx.ground_residual[win],
+                          clutter_band=ctx.clutter_band, drop_specks=cfg.rule != "paper", mask=own)
+        done = replace(done, box=_shift(done.box, x0, y0), segment_box=joined.segment_box
+                       if done.segment_box is None else _shift(done.segment_box, x0, y0))
         solid = _opened_share(own, square)  # in [0, 1]: the opening keeps a subset of the pixels
-        done = replace(done, purity=box_purity(done, labels, ctx.integral, own), solidity=solid,
+        done = replace(done, purity=box_purity(done, labels, ctx.integral, own, origin=origin), solidity=solid,
                        solidity_rel=solid / ctx.solidity, confidence=confidence)
         if first is None:
             first = done

@@ -151,13 +151,14 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
 
 
 def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Tensor,
-               mask: torch.Tensor | None = None) -> float:
+               mask: torch.Tensor | None = None, *, origin: tuple[int, int] = (0, 0)) -> float:
     """Share of the valid pixels inside ``area.box`` that belong to the area's segments (``mask``:
-    ``label_mask(labels, area.neurons)``, if the caller has it).
+    ``label_mask(labels, area.neurons)``, if the caller has it, or that mask on a window of the map
+    whose top-left pixel is ``origin`` (x, y) and which holds ``area.box``).
 
     Shape:
-        ``labels``, ``mask`` ``(H, W)``; ``valid_integral`` ``(H+1, W+1)``: the integral image of the
-        valid mask.
+        ``labels`` ``(H, W)``; ``mask`` ``(H, W)`` or the window's shape; ``valid_integral``
+        ``(H+1, W+1)``: the integral image of the valid mask.
     """
     x0, y0, x1, y1 = area.box
     ii = valid_integral
@@ -165,7 +166,8 @@ def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Ten
     if mask is None:
         own = int(label_mask(labels[y0:y1 + 1, x0:x1 + 1], area.neurons).sum())
     else:
-        own = int(mask[y0:y1 + 1, x0:x1 + 1].sum())
+        ox, oy = origin
+        own = int(mask[y0 - oy:y1 - oy + 1, x0 - ox:x1 - ox + 1].sum())
     return own / max(n_valid, 1)
 
 

@@ -257,3 +257,46 @@ def test_refine_box_drops_a_band_of_speckles_but_keeps_thin_parts_of_a_solid_pie
     specks[::4, ::4] = 0
     sp = _area([0], (0, 0, 48, 48))
     assert refine_box(sp, specks, coverage=1.0, quantile=0.0, drop_specks=True).box == (0, 0, 48, 48)
+
+
+def test_kept_areas_reads_each_candidates_window_with_the_whole_maps_result():
+    """kept_areas refines and checks each candidate on the window of its segments (widened by half
+    the solidity square where the map goes on) instead of the whole map: boxes, purity and solidity
+    must be those of the whole-map computation, for areas inside the image and at its border (where
+    OpenCV's opening treats the outside as part of the mask)."""
+    from dataclasses import replace
+
+    from somtorch.tasks.detect import _window
+    from somtorch.tasks.objects import label_mask
+    from somtorch.tasks.refine import _opened_share, _square
+
+    h, w = 90, 120
+    labels = torch.full((h, w), 3, dtype=torch.long)  # the background
+    labels[30:60, 40:70] = 0  # a block with a 2 px thin line along the top of its box, running on to
+    labels[28:30, 40:80] = 0  # the box's right edge: the opening removes the line on the whole map
+    labels[0:30, 0:12] = 1  # an area at the image's corner, and one with specks in its box
+    labels[70:85, 90:110] = 2
+    labels[72:84:3, 92:108:4] = -1
+    disp = torch.full((h, w), 5.0, dtype=torch.float64)
+    disp[labels == 0], disp[labels == 1], disp[labels == 2] = 30.0, 20.0, 40.0
+    valid = labels >= 0
+    cfg = AreaConfig(min_purity=0.0, min_solidity=0.0, keep_budget=1.0, merge=0.0)
+    ctx = MapContext.build(disp, valid, valid, None, cfg)
+    stats = neuron_stats(labels, disp, 4)
+    areas = [a for a in find_object_areas(stats.mean_d, None, stats, cfg) if 3 not in a.neurons]
+    kept = kept_areas(areas, stats, labels, cfg, ctx)
+    assert sorted(a.neurons for a in kept) == [[0], [1], [2]]
+    square = _square(labels.shape, cfg.solidity_size, 1)
+    for a in kept:
+        own = label_mask(labels, a.neurons)
+        full = refine_box(replace(a, box=a.segment_box or a.box), labels, coverage=cfg.box_coverage,
+                          quantile=cfg.box_quantile, mask=own)
+        assert a.box == full.box
+        assert a.purity == box_purity(a, labels, ctx.integral, own)
+        assert a.solidity == _opened_share(own, square)
+    line = next(a for a in kept if a.neurons == [0])
+    assert line.solidity < 1.0  # the line is opened away (on the box alone it would not be)
+    x0, y0, x1, y1 = 40, 28, 79, 59
+    assert _opened_share(label_mask(labels[y0:y1 + 1, x0:x1 + 1], [0]), square) > line.solidity
+    win, origin = _window((0, 0, 11, 29), (h, w), 4)
+    assert origin == (0, 0) and (win[0].stop, win[1].stop) == (34, 16)
