@@ -166,12 +166,20 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     valid = scene.valid
     with timer("ground"):
         ground = ground_fn(valid) if ground_fn is not None else fit_ground_plane(scene.disparity, valid, cfg.ground)
+    stride = train_stride(scene, cfg)
+    if ground is not None and not bool((valid & ~ground.mask)[::stride, ::stride].any()):
+        # an empty floor or table seen from above: the plane is the whole map, and cutting it would
+        # leave nothing to train on. The map is segmented whole (the object step's contrast rule,
+        # with its fail-safe), as if no plane had been found.
+        log.warning("scene %s: the ground plane holds %d of the %d valid pixels and leaves none to train on "
+                    "(every %dth pixel); it is not removed, the map is segmented whole", scene.name,
+                    int(ground.mask.sum()), scene.n_valid, stride)
+        ground = None
     with timer("features"):
         work = on_support(scene, ground, cfg.features)[0]
         # the plane's pixels leave the map, except under heights above it (they are its level 0)
         usable = valid if ground is None or work is not scene else valid & ~ground.mask
         rows = usable
-        stride = train_stride(scene, cfg)
         if grid > 1:  # the grid's pixels and the training pixels
             rows = torch.zeros_like(usable)
             rows[::grid, ::grid] = usable[::grid, ::grid]

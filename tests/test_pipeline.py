@@ -208,6 +208,31 @@ def test_a_map_without_a_convincing_object_keeps_everything_flags_it_and_warns(c
     assert "no convincing object area" in caplog.text and "3 of 3" in caplog.text
 
 
+def test_a_map_that_is_all_ground_is_segmented_whole_with_a_warning(caplog):
+    """An empty floor seen from above: the support test takes the whole map as its plane, and
+    cutting it would leave nothing to train on. The plane is not removed and the map is segmented
+    whole (before: a ValueError saying the map had no valid pixel). A box on the same floor still
+    has its floor cut."""
+    import logging
+
+    from somtorch.disparity.scene import scene_from_arrays
+
+    ys, xs = torch.meshgrid(torch.arange(120.0), torch.arange(160.0), indexing="ij")
+    floor = 10.0 + 0.02 * xs + 0.01 * ys
+    valid = torch.ones(120, 160, dtype=torch.bool)
+    with caplog.at_level(logging.WARNING, logger="somtorch.pipeline"):
+        res = run_pipeline(scene_from_arrays(floor, valid, name="empty_floor"), PipelineConfig(ensemble=2),
+                           metrics=False)
+    assert res.ground is None and "leaves none to train on" in caplog.text
+    assert bool((res.labels >= 0).all()) and all(m.kept for m in res.members)
+    boxed = floor.clone()
+    boxed[50:70, 50:80] += 8.0
+    res = run_pipeline(scene_from_arrays(boxed, valid, name="box_on_floor"), PipelineConfig(ensemble=2),
+                       metrics=False)
+    assert res.ground is not None and res.ground.support
+    assert all(m.kept[0].box == (50, 50, 78, 68) for m in res.members)  # the object step reads every 2nd pixel
+
+
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
     not torch.cuda.is_available(), reason="no CUDA device on this machine"))])
 def test_device_flows_through_the_pipeline(device):
