@@ -232,11 +232,19 @@ def _panel_grid(plt, n: int, title: str, ncols: int = 3):
     return fig, list(axes.flat[:n])
 
 
+def _tick(config: object) -> str:
+    """A configuration's name as a tick label: a long snake_case name on two lines."""
+    name = str(config)
+    return name.replace("_", "\n", 1) if len(name) > 10 else name
+
+
 def _by_scene(scored: list[dict]) -> dict[str, list[dict]]:
+    """The rows of each scene: the SOM's modes first (NOR, OR), then the task baselines ("all px")."""
     out: dict[str, list[dict]] = {}
     for r in scored:
         out.setdefault(r["scene"], []).append(r)
-    return out
+    order = {"NOR": 0, "OR": 1}
+    return {s: sorted(rs, key=lambda r: (order.get(r["mode"], 2), str(r["config"]))) for s, rs in out.items()}
 
 
 def tables_plot(rows: list[dict], out: Path, paper1: list[tuple], paper2: list[tuple]) -> list[str]:
@@ -261,7 +269,7 @@ def tables_plot(rows: list[dict], out: Path, paper1: list[tuple], paper2: list[t
         x = np.arange(len(rs))
         for j, (key, name) in enumerate(keys):
             ax.bar(x + (j - 1) * 0.27, [100.0 * r[key] / r["runs"] for r in rs], 0.27, color=f"C{j}", label=name)
-        ax.set_xticks(x, [f"{r['mode']} {r['config']}\n{r['runs']} runs" for r in rs], fontsize=8)
+        ax.set_xticks(x, [f"{r['mode']}\n{_tick(r['config'])}\n{r['runs']} runs" for r in rs], fontsize=7)
         ax.set_title(scene, fontsize=10)
     if paper1:
         ax = axes[-1]
@@ -288,7 +296,7 @@ def tables_plot(rows: list[dict], out: Path, paper1: list[tuple], paper2: list[t
                 ax.plot([i, i], [r["x_min"], r["x_max"]], color="C0", lw=2)
                 ax.plot(i, r["x_mean"], "o", color="C0", label="ours: x_min … x_max, mean")
             ax.plot(i, r["x_opt"], "k_", ms=18, mew=2, label="x_opt (exactly the object's box)")
-        ax.set_xticks(range(len(rs)), [f"{r['mode']} {r['config']}" for r in rs], fontsize=8)
+        ax.set_xticks(range(len(rs)), [f"{r['mode']}\n{_tick(r['config'])}" for r in rs], fontsize=7)
         ax.set_xlim(-0.6, len(rs) - 0.4)
         ax.set_title(scene, fontsize=10)
     if paper2:
