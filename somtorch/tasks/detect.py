@@ -50,6 +50,10 @@ class MapContext:
             else None (no continuity link on this map).
         continuity: where ``islands`` is set, :func:`~somtorch.tasks.objects.pair_continuity` of
             the map (whether each 4-connected pixel pair is continuous in depth); else None.
+        uncut: where a ground plane was cut (``salient`` rule), the 8-connected regions of the map
+            without the plane's pixels ``(H, W)`` long (invalid pixels join them: only the cut
+            ground separates); else None. An area spread over several is split (:func:`kept_areas`).
+        n_islands: the number of labels of ``islands`` (0 where it is None).
     """
 
     disparity: torch.Tensor
@@ -63,6 +67,8 @@ class MapContext:
     surround: tuple[torch.Tensor, torch.Tensor] | None = None
     islands: torch.Tensor | None = None
     continuity: torch.Tensor | None = None
+    uncut: torch.Tensor | None = None
+    n_islands: int = 0
 
     @classmethod
     def build(cls, disparity: torch.Tensor, valid: torch.Tensor, segmented: torch.Tensor,
@@ -77,9 +83,10 @@ class MapContext:
         islands = continuity = None
         if ground is not None and ground.support and cfg.rule != "paper":
             islands, continuity = _islands(segmented), pair_continuity(disparity)
+        uncut = _islands(segmented | ~valid) if ground is not None and cfg.rule != "paper" else None
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
                    map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity), islands,
-                   continuity)
+                   continuity, uncut, 0 if islands is None else int(islands.max()) + 1)
 
 
 def _islands(segmented: torch.Tensor) -> torch.Tensor:
@@ -101,16 +108,15 @@ def linkable_segments(labels: torch.Tensor, stats: NeuronStats, ctx: MapContext,
         ``labels`` ``(H, W)`` long (−1 not segmented).
     """
     k = int(stats.count.shape[0])
-    seg = labels >= 0
-    lab = torch.where(seg, labels, k).view(-1)
+    lab = torch.where(labels >= 0, labels, k).view(-1)
     ok = torch.ones(k, dtype=torch.bool)
     if ctx.ground_residual is not None:
         res = torch.bincount(lab, weights=ctx.ground_residual.reshape(-1).double(), minlength=k + 1)[:k]
         ok &= res > ctx.clutter_band * stats.count  # left-over ground pixels chain everything they touch
-    isl = ctx.islands
-    n_isl = int(isl.max()) + 1
-    keys = (labels * n_isl + isl)[seg]  # (segment, island) of every segmented pixel
-    table = torch.bincount(keys, minlength=k * n_isl).view(k, n_isl)
+    isl = ctx.islands.view(-1)
+    n_isl = ctx.n_islands
+    # (segment, island) of every pixel; the unsegmented ones in row K, left out
+    table = torch.bincount(lab * n_isl + isl, minlength=(k + 1) * n_isl).view(k + 1, n_isl)[:k]
     ok &= table.amax(1).double() >= cfg.box_coverage * stats.count  # a straddling segment chains two objects
     return ok
 
@@ -167,18 +173,63 @@ def _shift(box: tuple[int, int, int, int], dx: int, dy: int) -> tuple[int, int, 
     return box[0] + dx, box[1] + dy, box[2] + dx, box[3] + dy
 
 
+def _parts(own: torch.Tensor, uncut: torch.Tensor | None, coverage: float, residual: torch.Tensor | None,
+           band: float) -> list[torch.Tensor]:
+    """An area's pixels ``own`` split by the cut ground: one mask per island of ``uncut`` (the
+    8-connected regions of the map without the ground plane's pixels) that holds more than ``1 −
+    coverage`` of them and does not lie flat on the ground (most of its pixels within ``band`` px of
+    the plane, ``residual`` = |d − plane|: :func:`refine_box`'s ground clutter), largest first;
+    ``[own]`` where no plane was cut, one island holds all, or every part lies on the ground."""
+    if uncut is None:
+        return [own]
+    ids, counts = torch.unique(uncut[own], return_counts=True)
+    if ids.numel() <= 1:
+        return [own]
+    order = torch.argsort(counts, descending=True, stable=True).tolist()
+    total = float(own.sum())
+    parts = [own & (uncut == ids[i]) for i in order if i == order[0] or counts[i] > (1 - coverage) * total]
+    if residual is not None and band > 0:
+        parts = [p for p in parts if float((residual[p] < band).double().mean()) <= 0.5]
+    return parts or [own]
+
+
+def _refined(joined: ObjectArea, part: torch.Tensor, labels: torch.Tensor, win: tuple[slice, slice],
+             origin: tuple[int, int], square: int, confidence: float, cfg: AreaConfig, ctx: MapContext
+             ) -> ObjectArea:
+    """``joined`` restricted to the pixels ``part`` of the window ``win`` (top-left ``origin``): its
+    refined box (:func:`refine_box`), purity, solidity and confidence, in map coordinates."""
+    x0, y0 = origin
+    n = int(part.sum())
+    local = replace(joined, box=_shift(joined.box, -x0, -y0), segment_box=None)
+    if n != joined.pixels:  # a part of the area: its own pixels and extent
+        ys, xs = part.nonzero(as_tuple=True)
+        local = replace(local, pixels=n, area_frac=joined.area_frac * n / max(joined.pixels, 1),
+                        box=(int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())),
+                        mean_disparity=float(ctx.disparity[win][part].double().mean()))
+    done = refine_box(local, labels[win], coverage=cfg.box_coverage, quantile=cfg.box_quantile,
+                      ground_residual=None if ctx.ground_residual is None else ctx.ground_residual[win],
+                      clutter_band=ctx.clutter_band, drop_specks=cfg.rule != "paper", mask=part)
+    done = replace(done, box=_shift(done.box, x0, y0), segment_box=joined.segment_box
+                   if done.segment_box is None else _shift(done.segment_box, x0, y0))
+    solid = _opened_share(part, square)  # in [0, 1]: the opening keeps a subset of the pixels
+    return replace(done, purity=box_purity(done, labels, ctx.integral, part, origin=origin), solidity=solid,
+                   solidity_rel=solid / ctx.solidity, confidence=confidence)
+
+
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
                ctx: MapContext) -> list[ObjectArea]:
     """Select, join, refine and check the candidates in rank order.
 
     Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with
-    segments of an area kept before it), its box refined (:func:`refine_box`), and kept if its
+    segments of an area kept before it) and, where the cut ground separates its pixels, split into
+    parts (``ctx.uncut``; :func:`_parts`), each then treated as a candidate of its own: its box
+    refined (:func:`refine_box`), and kept if its
     :func:`box_purity` reaches ``cfg.min_purity`` and its segments' solidity reaches
     ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a dense map's standard). After
     the first kept area, a further one must, with ``cfg.keep_budget < 1``, leave the union of the
     kept boxes within that share of the valid pixels (else it is skipped and the next candidate
-    tried). At most ``cfg.max_areas`` are kept, out of the ``cfg.max_areas``
-    best-ranked candidates (a failed check leaves room for the next of them). If none passed:
+    tried). At most ``cfg.max_areas`` areas are kept (the parts of one count once), out of the
+    ``cfg.max_areas`` best-ranked candidates (a failed check leaves room for the next of them). If none passed:
     nothing under the ``salient`` rule (the caller keeps the whole map), the paper rule's nearest
     area under ``rule="paper"`` (the paper always keeps it).
 
@@ -192,7 +243,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     """
     ranked = select_areas(areas, stats, cfg)
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
-    kept, first = [], None
+    kept, first, n_areas = [], None, 0
     square = _square(labels.shape, cfg.solidity_size, 1)
     best = max((rank_score(a, cfg) for a in ranked), default=0.0)
     for cand in ranked:
@@ -205,27 +256,26 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         # opening's square where the map goes on), not the whole map: the same result
         win, origin = _window(joined.box, labels.shape, square // 2 + 1)
         own = label_mask(labels[win], joined.neurons)  # refine_box moves the box, not the neurons
-        x0, y0 = origin
-        local = replace(joined, box=_shift(joined.box, -x0, -y0), segment_box=None)
-        done = refine_box(local, labels[win], coverage=cfg.box_coverage, quantile=cfg.box_quantile,
-                          ground_residual=None if ctx.ground_residual is None else ctx.ground_residual[win],
-                          clutter_band=ctx.clutter_band, drop_specks=cfg.rule != "paper", mask=own)
-        done = replace(done, box=_shift(done.box, x0, y0), segment_box=joined.segment_box
-                       if done.segment_box is None else _shift(done.segment_box, x0, y0))
-        solid = _opened_share(own, square)  # in [0, 1]: the opening keeps a subset of the pixels
-        done = replace(done, purity=box_purity(done, labels, ctx.integral, own, origin=origin), solidity=solid,
-                       solidity_rel=solid / ctx.solidity, confidence=confidence)
-        if first is None:
-            first = done
-        if done.purity >= cfg.min_purity and done.solidity_rel >= cfg.min_solidity:
+        any_kept = False
+        residual = None if ctx.ground_residual is None else ctx.ground_residual[win]
+        for part in _parts(own, None if ctx.uncut is None else ctx.uncut[win], cfg.box_coverage, residual,
+                           ctx.clutter_band):
+            done = _refined(joined, part, labels, win, origin, square, confidence, cfg, ctx)
+            if first is None:
+                first = done
+            if done.purity < cfg.min_purity or done.solidity_rel < cfg.min_solidity:
+                continue
             if kept and cfg.keep_budget < 1:
                 union = reduce_map([a.box for a in kept] + [done.box], ctx.valid, tolerance_px=0.0,
                                    tolerance_frac=0.0, tolerance_image=0.0, integral=ctx.integral)
                 if union.kept_union > cfg.keep_budget * max(union.valid_total, 1):
                     continue  # it would not fit the reduction budget; a smaller one may
             kept.append(done)
-            taken[torch.tensor(done.neurons)] = True
-            if len(kept) == cfg.max_areas:
+            any_kept = True
+        if any_kept:  # the parts of one area count as one of the max_areas
+            taken[torch.tensor(joined.neurons)] = True
+            n_areas += 1
+            if n_areas == cfg.max_areas:
                 break
     if not kept and first is not None and cfg.rule == "paper":
         kept = [first]

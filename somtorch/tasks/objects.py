@@ -185,7 +185,14 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
         m.fill_diagonal_(0.0)
         return m + m.T
 
-    boundary = symmetric(torch.bincount(flat, minlength=(k + 1) ** 2))
+    cont = None
+    if continuity is None:
+        boundary = symmetric(torch.bincount(flat, minlength=(k + 1) ** 2))
+    else:  # one bincount for both: key × 2 + (continuous across the pair)
+        if continuity.shape != flat.shape:
+            raise ValueError(f"continuity {tuple(continuity.shape)} is not pair_continuity() of a {h}×{w} map")
+        both = torch.bincount(flat * 2 + continuity, minlength=2 * (k + 1) ** 2).view(-1, 2)
+        boundary, cont = symmetric(both.sum(1)), symmetric(both[:, 1].contiguous())
     d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
     g_count = g_sum = None
     if surround is not None:
@@ -195,11 +202,6 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
         keys, d_out = keys[behind], d_out[behind]
         g_count = torch.bincount(keys, minlength=k).double()
         g_sum = torch.bincount(keys, weights=d_out, minlength=k).double()  # long when empty
-    cont = None
-    if continuity is not None:
-        if continuity.shape != flat.shape:
-            raise ValueError(f"continuity {tuple(continuity.shape)} is not pair_continuity() of a {h}×{w} map")
-        cont = symmetric(torch.bincount(flat[continuity], minlength=(k + 1) ** 2))
     return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, g_count, g_sum, cont)
 
 

@@ -40,6 +40,7 @@ def test_continuous_pair_counts_match_a_pixel_by_pixel_reference():
                     want[a, b] += 1
                     want[b, a] += 1
     assert torch.equal(stats.continuous, want)
+    assert torch.equal(stats.boundary, neuron_stats(labels, disp, k).boundary)  # one bincount for both
     assert bool((stats.continuous <= stats.boundary).all())
     assert neuron_stats(labels, disp, k).continuous is None  # only when asked for
     assert pair_continuity(disp).shape == (h * (w - 1) + (h - 1) * w,)
