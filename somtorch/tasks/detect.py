@@ -85,8 +85,8 @@ class MapContext:
             islands, continuity = _islands(segmented), pair_continuity(disparity)
         uncut = _islands(segmented | ~valid) if ground is not None and cfg.rule != "paper" else None
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
-                   map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity), islands,
-                   continuity, uncut, 0 if islands is None else int(islands.max()) + 1)
+                   map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity),
+                   islands, continuity, uncut, 0 if islands is None else int(islands.max()) + 1)
 
 
 def _islands(segmented: torch.Tensor) -> torch.Tensor:
@@ -99,10 +99,11 @@ def _islands(segmented: torch.Tensor) -> torch.Tensor:
 
 
 def linkable_segments(labels: torch.Tensor, stats: NeuronStats, ctx: MapContext, cfg: AreaConfig) -> torch.Tensor:
-    """The segments that may link by depth continuity (see :class:`~somtorch.config.AreaConfig`) ``(K,)`` bool:
-    those standing above the ground plane's clutter band (mean ``|d − plane|`` over ``ctx.clutter_band``;
-    every segment where there is no residual) that lie in one island (``ctx.islands``) of the
-    segmented pixels, the island holding at least ``cfg.box_coverage`` of their pixels.
+    """The segments that may link by depth continuity (see :class:`~somtorch.config.AreaConfig`)
+    ``(K,)`` bool: those standing above the ground plane's clutter band (mean ``|d − plane|`` over
+    ``ctx.clutter_band``; every segment where there is no residual) that lie in one island
+    (``ctx.islands``) of the segmented pixels, the island holding at least ``cfg.box_coverage`` of
+    their pixels.
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 not segmented).
@@ -194,10 +195,11 @@ def _parts(own: torch.Tensor, uncut: torch.Tensor | None, coverage: float, resid
 
 
 def _refined(joined: ObjectArea, part: torch.Tensor, labels: torch.Tensor, win: tuple[slice, slice],
-             origin: tuple[int, int], square: int, confidence: float, cfg: AreaConfig, ctx: MapContext
-             ) -> ObjectArea:
-    """``joined`` restricted to the pixels ``part`` of the window ``win`` (top-left ``origin``): its
-    refined box (:func:`refine_box`), purity, solidity and confidence, in map coordinates."""
+             origin: tuple[int, int], residual: torch.Tensor | None, square: int, confidence: float,
+             cfg: AreaConfig, ctx: MapContext) -> ObjectArea:
+    """``joined`` restricted to the pixels ``part`` of the window ``win`` (top-left ``origin``;
+    ``residual``: the ground residual on it): its refined box (:func:`refine_box`), purity,
+    solidity and confidence, in map coordinates."""
     x0, y0 = origin
     n = int(part.sum())
     local = replace(joined, box=_shift(joined.box, -x0, -y0), segment_box=None)
@@ -207,8 +209,8 @@ def _refined(joined: ObjectArea, part: torch.Tensor, labels: torch.Tensor, win: 
                         box=(int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())),
                         mean_disparity=float(ctx.disparity[win][part].double().mean()))
     done = refine_box(local, labels[win], coverage=cfg.box_coverage, quantile=cfg.box_quantile,
-                      ground_residual=None if ctx.ground_residual is None else ctx.ground_residual[win],
-                      clutter_band=ctx.clutter_band, drop_specks=cfg.rule != "paper", mask=part)
+                      ground_residual=residual, clutter_band=ctx.clutter_band,
+                      drop_specks=cfg.rule != "paper", mask=part)
     done = replace(done, box=_shift(done.box, x0, y0), segment_box=joined.segment_box
                    if done.segment_box is None else _shift(done.segment_box, x0, y0))
     solid = _opened_share(part, square)  # in [0, 1]: the opening keeps a subset of the pixels
@@ -229,8 +231,8 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     the first kept area, a further one must, with ``cfg.keep_budget < 1``, leave the union of the
     kept boxes within that share of the valid pixels (else it is skipped and the next candidate
     tried). At most ``cfg.max_areas`` areas are kept (the parts of one count once), out of the
-    ``cfg.max_areas`` best-ranked candidates (a failed check leaves room for the next of them). If none passed:
-    nothing under the ``salient`` rule (the caller keeps the whole map), the paper rule's nearest
+    ``cfg.max_areas`` best-ranked candidates (a failed check leaves room for the next of them). If
+    none passed: nothing under the ``salient`` rule (the caller keeps the whole map), the paper rule's nearest
     area under ``rule="paper"`` (the paper always keeps it).
 
     Every kept area carries its ``purity``, ``solidity`` (the opened share of its pixels, ≤ 1),
@@ -260,7 +262,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         residual = None if ctx.ground_residual is None else ctx.ground_residual[win]
         for part in _parts(own, None if ctx.uncut is None else ctx.uncut[win], cfg.box_coverage, residual,
                            ctx.clutter_band):
-            done = _refined(joined, part, labels, win, origin, square, confidence, cfg, ctx)
+            done = _refined(joined, part, labels, win, origin, residual, square, confidence, cfg, ctx)
             if first is None:
                 first = done
             if done.purity < cfg.min_purity or done.solidity_rel < cfg.min_solidity:

@@ -150,7 +150,7 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
             boundary with the unsegmented valid pixels (the ground) is counted too.
         continuity: :func:`pair_continuity` of ``disparity`` (the same for every member): also
             count, per pair of segments, the boundary pixel pairs across which the disparity is
-            continuous (:attr:`NeuronStats.continuous`; one more bincount on the same pair keys).
+            continuous (:attr:`NeuronStats.continuous`; counted in the boundary's bincount).
 
     Shape:
         ``labels`` ``(H, W)`` long (−1 invalid), ``disparity`` ``(H, W)``.
@@ -190,7 +190,8 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
         boundary = symmetric(torch.bincount(flat, minlength=(k + 1) ** 2))
     else:  # one bincount for both: key × 2 + (continuous across the pair)
         if continuity.shape != flat.shape:
-            raise ValueError(f"continuity {tuple(continuity.shape)} is not pair_continuity() of a {h}×{w} map")
+            raise ValueError(f"continuity {tuple(continuity.shape)} is not pair_continuity() of an "
+                             f"{h}×{w} map")
         both = torch.bincount(flat * 2 + continuity, minlength=2 * (k + 1) ** 2).view(-1, 2)
         boundary, cont = symmetric(both.sum(1)), symmetric(both[:, 1].contiguous())
     d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
@@ -287,7 +288,8 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
         cfg: recognition parameters.
         continuous: touching segments (``salient`` rule) also link where at least this share of
             their boundary's pixel pairs is continuous (:attr:`NeuronStats.continuous`; 0 = no
-            continuity link; the caller decides where it applies: on support-verified maps, ``CONTINUOUS_SHARE``).
+            continuity link; the caller decides where it applies: on support-verified maps,
+            ``CONTINUOUS_SHARE``).
         linkable: ``(K,)`` bool, the segments that may link by continuity (None = all).
 
     Returns:
@@ -304,7 +306,8 @@ def find_object_areas(ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
     adj = near & ((ref[:, None] - ref[None, :]).abs() < tau)
     if continuous > 0 and not paper:
         if stats.continuous is None:
-            raise ValueError("find_object_areas(continuous > 0) needs neuron_stats(..., continuity=pair_continuity(d))")
+            raise ValueError("find_object_areas(continuous > 0) needs "
+                             "neuron_stats(..., continuity=pair_continuity(d))")
         cont = near & (stats.boundary > 0) & (stats.continuous >= continuous * stats.boundary)
         if linkable is not None:
             cont &= linkable[:, None] & linkable[None, :]

@@ -130,7 +130,8 @@ def test_segments_straddling_two_islands_or_lying_on_the_floor_do_not_link_by_co
     low_labels, low_disp = _staircase()
     low_disp[low_labels == 0] = FLOOR_D + 1.0  # 1 px above the floor: inside 3 × the 0.5 px band
     _, low_ctx = _run(low_labels, low_disp, cfg)
-    low = linkable_segments(low_labels, neuron_stats(low_labels, low_disp, 4, continuity=pair_continuity(low_disp)), low_ctx, cfg)
+    low_stats = neuron_stats(low_labels, low_disp, 4, continuity=pair_continuity(low_disp))
+    low = linkable_segments(low_labels, low_stats, low_ctx, cfg)
     assert low.tolist() == [False, True, True, True]
 
 
