@@ -60,6 +60,7 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
                   "valid_pixels": scene.n_valid,
                   "invalid_pixels": scene.height * scene.width - scene.n_valid,
                   "ground_pixels": int(result.ground.mask.sum()) if result.ground is not None else 0,
+                  "median_window": result.median,
                   "has_objects": scene.objects is not None, "source": scene.source},
         "pixels": {"train": len(result.train_features), "segmented": len(result.features),
                    **train_strides(scene, result)},

@@ -27,11 +27,12 @@ from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, Pi
 from .core import SOM
 from .core.threads import contended
 from .disparity.features import Features, make_features, relative_disparity
+from .disparity.filters import median_filter
 from .disparity.scene import Scene
 from .resources import Estimate, estimate
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
 from .tasks.detect import MapContext, find_objects
-from .tasks.ground import GroundPlane, fit_ground_plane
+from .tasks.ground import GroundPlane, fit_ground_plane, noise_sigma
 from .tasks.objects import NeuronStats, ObjectArea
 from .tasks.reduction import Reduction, reduce_map, valid_integral
 from .tasks.scoring import Score, optimal_reduction, score_reduction
@@ -76,6 +77,8 @@ class PipelineResult:
         prototypes: feature-space centres ``(E, K, D)`` (SOM weights, k-means centres), or None.
         segmentation: the segmenter's own result, or None.
         config: the config that made it.
+        median: the window of the median the map was read through (``features.median`` where the
+            map is noisy, :func:`denoised`), 0 = read as given.
     """
 
     features: Features
@@ -93,6 +96,7 @@ class PipelineResult:
 
     segmentation: Segmentation | None = None
     config: PipelineConfig | None = None  # the config that made it
+    median: int = 0  # the median window the map was read through (0 = as given)
 
     @property
     def num_segments(self) -> int:
@@ -119,6 +123,19 @@ class _Timer:
 def _min_pixels(cfg: PipelineConfig) -> int:
     """Valid pixels a map needs: one per SOM neuron, at least 16."""
     return max(16, cfg.som.rows * cfg.som.cols if cfg.method in ("som", "minisom") else 16)
+
+
+def denoised(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int]:
+    """The scene every step reads, and the median window it was read through (0 = none): where the
+    map's per-pixel noise sets the ground band (``cfg.ground.noise_band`` × σ > ``cfg.ground.tol_px``,
+    σ = :func:`~somtorch.tasks.ground.noise_sigma`), its valid disparities through a
+    ``cfg.features.median`` window (:func:`~somtorch.disparity.filters.median_filter`); else the
+    scene as given. A dense sensor's noise splits one surface into speckled segments that no
+    opening, link or box rule puts back together (``docs/tuned_constants.md``)."""
+    k = cfg.features.median
+    if k <= 1 or cfg.ground.noise_band * noise_sigma(scene.disparity, scene.valid) <= cfg.ground.tol_px:
+        return scene, 0
+    return replace(scene, disparity=median_filter(scene.disparity, scene.valid, k)), k
 
 
 def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
@@ -378,6 +395,8 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     # SIGINT / SIGTERM stop it between epochs, chunks, members (somtorch.interrupt); torch threads no
     # more than the cores other processes leave free (the same bits at any count; tests/test_pipeline.py)
     with interrupt.deferred(), contended():
+        with timer("ground"):  # (the noise estimate: the ground band's input)
+            scene, window = denoised(scene, cfg)
         valid, ground, usable, feats, train = prepare(scene, cfg, timer)
         work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
         seg = run_segmenter(feats, train, work, usable, cfg, progress=progress, log_training=log_training,
@@ -393,4 +412,4 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
         with timer("errors"):
             qe = quantization_error(train.x, seg.prototypes)
     return PipelineResult(feats, train, seg.som, seg.labels, seg.ref_disparity, members, timer.t, qe, te, ground,
-                          cfg.method, seg.prototypes, seg, cfg)
+                          cfg.method, seg.prototypes, seg, cfg, window)

@@ -31,7 +31,7 @@ from .config import PipelineConfig, WarmStartConfig
 from .core import SOM
 from .core.threads import contended
 from .disparity.scene import Scene
-from .pipeline import MemberResult, _Timer, detect, map_stride, on_support, prepare
+from .pipeline import MemberResult, _Timer, denoised, detect, map_stride, on_support, prepare
 from .segmenters import Segmentation, _from_prototypes, run_segmenter
 from .tasks.ground import GroundPlane, fit_ground_plane
 from .tasks.segmentation import segment
@@ -114,6 +114,8 @@ class SequenceRunner:
 
     def _step(self, scene: Scene) -> FrameResult:
         cfg, timer, reused = self.cfg, _Timer(), [False]
+        with timer("ground"):
+            scene = denoised(scene, cfg)[0]  # a noisy frame through the median, as run_pipeline reads it
 
         def ground_fn(valid: torch.Tensor) -> GroundPlane | None:
             g, reused[0] = self._ground_for(scene, valid)

@@ -30,6 +30,12 @@ class FeatureConfig(Validated):
         reference_pixels: the pipeline's strides (``train_stride``, ``objects.map_stride``) are
             counted on an image of this many pixels (640 × 480), see :meth:`stride_at`; 0 = strides
             in pixels as given (the paper's reading).
+        median: a map whose per-pixel noise sets the ground band (``ground.noise_band`` × σ >
+            ``ground.tol_px``, σ its :func:`~somtorch.tasks.ground.noise_sigma`: a dense sensor's
+            noise) is read through a median of the valid disparities in this window (odd,
+            :func:`~somtorch.disparity.filters.median_filter`) by every step, ground plane included;
+            0 = never (the paper's reading). σ ≤ 0.1 px on every stereo and GT map of the corpus:
+            none of them is filtered (``docs/tuned_constants.md``). The outputs keep the map as given.
     """
 
     _group: ClassVar[str] = "features"
@@ -37,8 +43,12 @@ class FeatureConfig(Validated):
         "normalize": Choice(options.NORMALIZATIONS),
         "d_weight": POSITIVE, "d_mode": Choice(options.D_MODES),
         "color_weight": NON_NEGATIVE, "train_stride": POSITIVE_INT,
-        "reference_pixels": Interval(0, None, integer=True),
+        "reference_pixels": Interval(0, None, integer=True), "median": Interval(0, None, integer=True),
     }
+    _relations: ClassVar[list[tuple[Any, str]]] = [
+        (lambda c: c.median == 0 or c.median % 2 == 1,
+         "median={c.median} must be 0 (never) or an odd window"),
+    ]
 
     normalize: str = "image"
     d_weight: float = 2.0
@@ -46,6 +56,7 @@ class FeatureConfig(Validated):
     color_weight: float = 0.0
     train_stride: int = 10
     reference_pixels: int = 307_200
+    median: int = 3
 
     def stride_at(self, stride: int, height: int, width: int) -> int:
         """``stride`` (counted on ``reference_pixels``) on a ``height × width`` image: times

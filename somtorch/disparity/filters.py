@@ -44,3 +44,35 @@ def remove_speckles(disparity: torch.Tensor, valid: torch.Tensor, *, max_size_fr
     cv2.filterSpeckles(q, 0, max(1, int(max_size_frac * h * w)), max(1, int(round(max_diff_frac * spread * scale))))
     return torch.from_numpy(q != 0).to(valid.device) & valid
 
+
+
+def median_filter(disparity: torch.Tensor, valid: torch.Tensor, size: int, *,
+                  rows: int = 256) -> torch.Tensor:
+    """The median of the valid disparities in the ``size × size`` window around each valid pixel
+    (invalid pixels keep their value and are never read; an even count takes the lower middle
+    value, :func:`torch.nanmedian`). Edge-preserving: a surface's per-pixel noise goes, a depth edge
+    stays where more than half the window lies on one side of it. ``size`` ≤ 1: a copy.
+
+    Computed ``rows`` rows at a time (the window's values of a block are held at once).
+
+    Shape:
+        ``disparity``, ``valid``: ``(H, W)`` → ``(H, W)``, the dtype of ``disparity``.
+    """
+    check_tensor("disparity", disparity, ndim=2, floating=True)
+    check_tensor("valid", valid, ndim=2, dtype=torch.bool)
+    if size <= 1:
+        return disparity.clone()
+    if size % 2 == 0:
+        raise ValueError(f"median_filter: size must be odd; got {size}")
+    r = size // 2
+    h, w = disparity.shape
+    nan = torch.full((), float("nan"), dtype=disparity.dtype, device=disparity.device)
+    padded = torch.nn.functional.pad(torch.where(valid, disparity, nan)[None, None], (r, r, r, r),
+                                     value=float("nan"))[0, 0]
+    out = disparity.clone()
+    for y0 in range(0, h, rows):
+        y1 = min(h, y0 + rows)
+        block = padded[y0:y1 + 2 * r].unfold(0, size, 1).unfold(1, size, 1)  # (rows, W, size, size)
+        med = block.reshape(y1 - y0, w, size * size).nanmedian(-1).values
+        out[y0:y1] = torch.where(valid[y0:y1], med, disparity[y0:y1])
+    return out
