@@ -40,11 +40,18 @@ def test_warm_frames_keep_the_object_and_reuse_the_ground():
     assert set(res[1].timings) == {"ground", "features", "train", "segment", "objects"}
 
 
-def test_a_cold_frame_is_what_run_pipeline_gives():
+@pytest.mark.parametrize("noise", [0.0, 0.6])
+def test_a_cold_frame_is_what_run_pipeline_gives(noise):
+    """Also on a dense sensor's noisy frame, which both read through the median (features.median)."""
     cfg = with_overrides(PipelineConfig(), {"ensemble": 2})
     frame = next(pan_sequence(_world(), 120, 90, 1))
+    if noise:
+        g = torch.Generator().manual_seed(1)
+        frame = scene_from_arrays(frame.disparity + noise * torch.randn(frame.disparity.shape, generator=g),
+                                  objects=frame.objects, name="noisy")
     cold = SequenceRunner(cfg, warm=False).step(frame)
     ref = run_pipeline(frame, cfg, metrics=False)
+    assert ref.median == (3 if noise else 0)
     for got, want in zip(cold.members, ref.members):
         assert [a.box for a in got.kept] == [a.box for a in want.kept]
         assert got.reduction.reduction_union == want.reduction.reduction_union
