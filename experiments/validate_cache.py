@@ -47,21 +47,25 @@ class SceneCache:
         import torch
 
         from somtorch.config import with_overrides
+        from somtorch.disparity.filters import median_filter
         from somtorch.pipeline import denoised, detect, on_support, prepare
         from somtorch.segmenters import run_segmenter
 
         cfg = with_overrides(self.base, overrides)
         up = _key({k: v for k, v in overrides.items() if k.split(".")[0] in UPSTREAM})
         if up not in self._seg:
-            scene = denoised(self.scene, cfg)[0]
+            scene, window = denoised(self.scene, cfg)
             valid, ground, usable, feats, train = prepare(scene, cfg)
             seg = run_segmenter(feats, train, on_support(scene, ground, cfg.features)[0], usable, cfg)
             # kept as int16 (a SOM has far fewer neurons): 30 members x 22 scenes x every upstream
             # setting of the grid as int64 label maps outgrew 24 GiB
             small = seg.labels.to(torch.int16) if int(seg.labels.max()) < 2 ** 15 else seg.labels
-            self._seg[up] = (ground, replace(seg, labels=small, som=None))  # (the object step reads no map)
-        ground, seg = self._seg[up]
-        scene = denoised(self.scene, cfg)[0]
+            # (the object step reads no map; of the median only its window is kept, not a filtered copy)
+            self._seg[up] = (ground, replace(seg, labels=small, som=None), window)
+        ground, seg, window = self._seg[up]
+        scene = self.scene
+        if window:  # the map the segmentation read (features.median): only a noisy frame's
+            scene = replace(scene, disparity=median_filter(scene.disparity, scene.valid, window))
         return ground, detect(scene, replace(seg, labels=seg.labels.long()), ground, cfg)
 
     def score(self, overrides: dict[str, Any], saliency: bool = False) -> dict[str, Any]:

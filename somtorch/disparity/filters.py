@@ -45,7 +45,6 @@ def remove_speckles(disparity: torch.Tensor, valid: torch.Tensor, *, max_size_fr
     return torch.from_numpy(q != 0).to(valid.device) & valid
 
 
-
 def median_filter(disparity: torch.Tensor, valid: torch.Tensor, size: int, *,
                   rows: int = 256) -> torch.Tensor:
     """The median of the valid disparities in the ``size × size`` window around each valid pixel

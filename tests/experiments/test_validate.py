@@ -14,6 +14,7 @@ import pytest
 from experiments.datasets import datasets, frames, load_frame
 from experiments.protocol import FrameTable, decide
 from experiments.validate import SceneCache
+from somtorch.config import with_overrides
 from somtorch.config import PipelineConfig
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -164,6 +165,34 @@ def test_scene_cache_segments_once_per_upstream_setting(shared_data):
     assert cache.score({}) is base
     sal = cache.score({}, saliency=True)["saliency"]
     assert 0 <= sal["f_measure"] <= 1 and 0 <= sal["mae"] <= 1 and 0 <= sal["s_measure"] <= 1
+
+
+def test_scene_cache_reads_a_noisy_frame_through_the_median_as_run_pipeline_does():
+    """The protocol scores what the pipeline runs: a dense sensor's noisy frame is segmented and
+    its object step run on the median-filtered map (features.median), in the cache as in
+    run_pipeline; with median 0 neither filters."""
+    import torch
+
+    from experiments.datasets import FrameSpec
+    from somtorch.disparity.scene import scene_from_arrays
+    from somtorch.pipeline import run_pipeline
+
+    ys, xs = torch.meshgrid(torch.arange(96.0), torch.arange(128.0), indexing="ij")
+    d = 30.0 + 0.02 * xs + 0.01 * ys
+    objects = torch.zeros(96, 128, dtype=torch.long)
+    d[30:60, 30:70] += 2.5
+    objects[30:60, 30:70] = 1
+    d = d + 0.5 * torch.randn(96, 128, generator=torch.Generator().manual_seed(3))
+    scene = scene_from_arrays(d, torch.ones(96, 128, dtype=torch.bool), objects=objects, name="noisy_floor")
+    cfg = PipelineConfig(ensemble=2)
+    cache = SceneCache(FrameSpec(name="noisy_floor", dataset="t", real=False, folder="."), scene, cfg)
+    for over in ({}, {"features.median": 0}):
+        ground, members = cache.members(over)
+        ref = run_pipeline(scene, with_overrides(cfg, over), metrics=False)
+        assert ref.median == (0 if over else 3)
+        assert [[(a.box, a.mean_disparity, a.contrast) for a in m.kept] for m in members] == \
+            [[(a.box, a.mean_disparity, a.contrast) for a in m.kept] for m in ref.members]
+        assert [m.reduction.reduction_union for m in members] == [m.reduction.reduction_union for m in ref.members]
 
 
 def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
