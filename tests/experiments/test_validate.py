@@ -192,7 +192,8 @@ def test_scene_cache_reads_a_noisy_frame_through_the_median_as_run_pipeline_does
         assert ref.median == (0 if over else 3)
         assert [[(a.box, a.mean_disparity, a.contrast) for a in m.kept] for m in members] == \
             [[(a.box, a.mean_disparity, a.contrast) for a in m.kept] for m in ref.members]
-        assert [m.reduction.reduction_union for m in members] == [m.reduction.reduction_union for m in ref.members]
+        assert [m.reduction.reduction_union for m in members] == \
+            [m.reduction.reduction_union for m in ref.members]
 
 
 def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
