@@ -36,6 +36,8 @@ class FeatureConfig(Validated):
             :func:`~somtorch.disparity.filters.median_filter`) by every step, ground plane included;
             0 = never (the paper's reading). σ ≤ 0.1 px on every stereo and GT map of the corpus:
             none of them is filtered (``docs/tuned_constants.md``). The outputs keep the map as given.
+            A map with less noise than the trigger (0.1–0.25 px: it would gain too) can be passed
+            through :func:`~somtorch.disparity.filters.median_filter` before the pipeline.
     """
 
     _group: ClassVar[str] = "features"
