@@ -132,10 +132,19 @@ def denoised(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int]:
     ``cfg.features.median`` window (:func:`~somtorch.disparity.filters.median_filter`); else the
     scene as given. A dense sensor's noise splits one surface into speckled segments that no
     opening, link or box rule puts back together (``docs/tuned_constants.md``)."""
+    return _denoise(scene, cfg)[:2]
+
+
+def _denoise(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int, float | None]:
+    """:func:`denoised`, and σ of the scene it returns where measured (a map read as given: the
+    ground fit reads it instead of measuring it again), else None."""
     k = cfg.features.median
-    if k <= 1 or cfg.ground.noise_band * noise_sigma(scene.disparity, scene.valid) <= cfg.ground.tol_px:
-        return scene, 0
-    return replace(scene, disparity=median_filter(scene.disparity, scene.valid, k)), k
+    if k <= 1:
+        return scene, 0, None
+    sigma = noise_sigma(scene.disparity, scene.valid)
+    if cfg.ground.noise_band * sigma <= cfg.ground.tol_px:
+        return scene, 0, sigma
+    return replace(scene, disparity=median_filter(scene.disparity, scene.valid, k)), k, None
 
 
 def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
@@ -163,7 +172,8 @@ def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
 
 
 def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
-            ground_fn: Callable[[torch.Tensor], GroundPlane | None] | None = None, grid: int = 1
+            ground_fn: Callable[[torch.Tensor], GroundPlane | None] | None = None, grid: int = 1,
+            sigma: float | None = None
             ) -> tuple[torch.Tensor, GroundPlane | None, torch.Tensor, Features, Features]:
     """Stages clean, ground and features: ``(valid, ground, usable, features, training features)``.
 
@@ -171,7 +181,8 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     previous frame's plane). ``grid``: feature vectors only for the usable pixels on every
     ``grid``-th row and column and on the training grid (a warm video frame, whose object step
     reads no other pixel; the scaling then comes from those pixels); ``usable`` is always the whole
-    map's.
+    map's. ``sigma``: the map's :func:`~somtorch.tasks.ground.noise_sigma` if already measured
+    (by :func:`denoised`'s trigger), passed to the ground fit.
 
     Raises:
         ValueError: before any work, for a map no segmentation can use: fewer valid pixels than
@@ -182,7 +193,8 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     check_usable(scene, cfg)
     valid = scene.valid
     with timer("ground"):
-        ground = ground_fn(valid) if ground_fn is not None else fit_ground_plane(scene.disparity, valid, cfg.ground)
+        ground = ground_fn(valid) if ground_fn is not None else fit_ground_plane(scene.disparity, valid, cfg.ground,
+                                                                                 sigma=sigma)
     stride = train_stride(scene, cfg)
     if ground is not None and not bool((valid & ~ground.mask)[::stride, ::stride].any()):
         # an empty floor or table seen from above: the plane is the whole map, and cutting it would
@@ -396,8 +408,8 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     # more than the cores other processes leave free (the same bits at any count; tests/test_pipeline.py)
     with interrupt.deferred(), contended():
         with timer("ground"):  # (the noise estimate: the ground band's input)
-            scene, window = denoised(scene, cfg)
-        valid, ground, usable, feats, train = prepare(scene, cfg, timer)
+            scene, window, sigma = _denoise(scene, cfg)
+        valid, ground, usable, feats, train = prepare(scene, cfg, timer, sigma=sigma)
         work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
         seg = run_segmenter(feats, train, work, usable, cfg, progress=progress, log_training=log_training,
                             timer=timer)

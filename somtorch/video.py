@@ -31,7 +31,7 @@ from .config import PipelineConfig, WarmStartConfig
 from .core import SOM
 from .core.threads import contended
 from .disparity.scene import Scene
-from .pipeline import MemberResult, _Timer, denoised, detect, map_stride, on_support, prepare
+from .pipeline import MemberResult, _denoise, _Timer, detect, map_stride, on_support, prepare
 from .segmenters import Segmentation, _from_prototypes, run_segmenter
 from .tasks.ground import GroundPlane, fit_ground_plane
 from .tasks.segmentation import segment
@@ -88,7 +88,8 @@ class SequenceRunner:
         self._ground_age = 0
         self._index = 0
 
-    def _ground_for(self, scene: Scene, valid: torch.Tensor) -> tuple[GroundPlane | None, bool]:
+    def _ground_for(self, scene: Scene, valid: torch.Tensor,
+                    sigma: float | None = None) -> tuple[GroundPlane | None, bool]:
         g, cfg = self._ground, self.cfg.ground
         if self.reuse_ground and g is not None and self._ground_age < self.ground_every:
             h, w = scene.disparity.shape
@@ -99,7 +100,7 @@ class SequenceRunner:
                 plane = GroundPlane(g.a, g.b, g.c, g.tol, mask, share, g.support)
                 plane._cache = g._cache  # the same plane: its disparity map is not recomputed
                 return plane, True
-        g = fit_ground_plane(scene.disparity, valid, cfg)
+        g = fit_ground_plane(scene.disparity, valid, cfg, sigma=sigma)
         self._ground, self._ground_age = g, 0
         return g, False
 
@@ -114,11 +115,11 @@ class SequenceRunner:
 
     def _step(self, scene: Scene) -> FrameResult:
         cfg, timer, reused = self.cfg, _Timer(), [False]
-        with timer("ground"):
-            scene = denoised(scene, cfg)[0]  # a noisy frame through the median, as run_pipeline reads it
+        with timer("ground"):  # a noisy frame through the median, as run_pipeline reads it
+            scene, _, sigma = _denoise(scene, cfg)
 
         def ground_fn(valid: torch.Tensor) -> GroundPlane | None:
-            g, reused[0] = self._ground_for(scene, valid)
+            g, reused[0] = self._ground_for(scene, valid, sigma)
             return g
 
         # a warm frame computes features only where its object step reads (every map_stride-th

@@ -280,6 +280,32 @@ def test_a_noisy_map_is_read_through_the_median_and_a_clean_one_as_given():
         replace(cfg.features, median=4)
 
 
+def test_the_noise_is_measured_once_for_a_map_read_as_given(monkeypatch):
+    """The median's trigger and the ground band read the same σ: measured once on a map read as
+    given, and again only on the filtered map of a noisy one (whose σ the band needs)."""
+    import somtorch.pipeline as pipeline_module
+    import somtorch.tasks.ground as ground_module
+
+    calls = []
+    real = ground_module.noise_sigma
+
+    def counted(d, v):
+        calls.append(1)
+        return real(d, v)
+
+    monkeypatch.setattr(ground_module, "noise_sigma", counted)
+    monkeypatch.setattr(pipeline_module, "noise_sigma", counted)
+    clean = _floor_with_boxes(0.0)
+    res = run_pipeline(clean, PipelineConfig(ensemble=1), metrics=False)
+    assert res.median == 0 and res.ground is not None and len(calls) == 1
+    calls.clear()
+    assert run_pipeline(_floor_with_boxes(0.5), PipelineConfig(ensemble=1), metrics=False).median == 3
+    assert len(calls) == 2
+    # the plane is the one a fit that measures σ itself finds
+    own = ground_module.fit_ground_plane(clean.disparity, clean.valid, PipelineConfig().ground)
+    assert (own.a, own.b, own.c, own.tol) == (res.ground.a, res.ground.b, res.ground.c, res.ground.tol)
+
+
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
     not torch.cuda.is_available(), reason="no CUDA device on this machine"))])
 def test_device_flows_through_the_pipeline(device):

@@ -67,12 +67,14 @@ class GroundPlane:
 
 
 def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundConfig | None = None, *,
-                     seed: int = 0) -> GroundPlane | None:
+                     seed: int = 0, sigma: float | None = None) -> GroundPlane | None:
     """Find the ground plane of a disparity map, or None if there is none (see the module docstring).
 
     ``seed``: RANSAC's own seed. The pipeline keeps 0: the plane is a property of the map, the
     same for every SOM seed and every member of an ensemble; tests vary it to check that the
-    plane found does not depend on the draw.
+    plane found does not depend on the draw. ``sigma``: :func:`noise_sigma` of the map's valid
+    pixels where the caller has measured it already (the pipeline's median trigger), else measured
+    here.
 
     Shape:
         ``disparity``, ``valid``: ``(H, W)``.
@@ -94,7 +96,10 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     lo_q = dv.kthvalue(max(1, int(0.01 * m))).values
     hi_q = dv.kthvalue(max(1, int(0.99 * m))).values
     span = max(float(hi_q - lo_q), 1e-9)  # robust disparity range (outliers of SGBM maps ignored)
-    noise = cfg.noise_band * noise_sigma(disparity, ok) if cfg.noise_band > 0 else 0.0
+    if cfg.noise_band > 0:
+        noise = cfg.noise_band * (noise_sigma(disparity, ok) if sigma is None else sigma)
+    else:
+        noise = 0.0
     if noise > 0.5 * span:  # neighbours differ as much as the whole map: noise, no surface to fit
         noise = 0.0  # (a band of half the range would hold most pixels of any map)
     tol = max(cfg.tol_px, cfg.tol_frac * span, noise)
