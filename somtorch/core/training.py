@@ -149,6 +149,39 @@ def accumulate(x: torch.Tensor, weight: torch.Tensor,
     return sums.view(e, k, d), counts.view(e, k)
 
 
+def fixed_order_bmm(a: torch.Tensor, b: torch.Tensor, *, chunk_elements: int = DEFAULT_CHUNK_ELEMENTS
+                    ) -> torch.Tensor:
+    """``a @ b`` per batch member, summed in one fixed order: the same bits in every process, at
+    every thread count.
+
+    A BLAS product (``torch.bmm``) may sum in another order from one call to the next (MKL picks its
+    kernel and its split by the process's threading state): bitwise-equal inputs then give
+    different last bits, and a SOM trained for ten epochs drifts apart (docs/reliability.md). Here
+    every product ``a[e, i, j] b[e, j, c]`` is one rounded multiply, and the terms are added as a
+    balanced tree over ``j`` (first half + second half, level by level), one rounded add each: no
+    fused multiply-add, no order left to a library. Rows of the output are computed in chunks of
+    at most ``chunk_elements`` products; a row's sum does not depend on the chunking.
+
+    Shape:
+        ``a`` ``(E, M, J)``, ``b`` ``(E, J, C)`` → ``(E, M, C)``.
+    """
+    e, m, j = a.shape
+    c = b.shape[-1]
+    out = torch.empty(e, m, c, dtype=torch.result_type(a, b), device=a.device)
+    rows = max(1, chunk_elements // max(1, e * j * c))
+    for r in range(0, m, rows):
+        terms = a[:, r:r + rows, :, None] * b[:, None]  # (E, m', J, C): one rounding each
+        n = j
+        while n > 1:  # in place: terms[:half] += terms[half:2 half]; an odd last term moves up
+            half = n // 2
+            terms[:, :, :half] += terms[:, :, half:2 * half]
+            if n % 2:
+                terms[:, :, half] = terms[:, :, n - 1]
+            n = half + n % 2
+        out[:, r:r + rows] = terms[:, :, 0]
+    return out
+
+
 def batch_target(sums: torch.Tensor, counts: torch.Tensor, sigma: torch.Tensor, grid_d2: torch.Tensor,
                  neighborhood: NeighborhoodFn) -> tuple[torch.Tensor, torch.Tensor]:
     """Kohonen's batch-map target: neighbourhood-weighted means of the won samples.
@@ -162,11 +195,9 @@ def batch_target(sums: torch.Tensor, counts: torch.Tensor, sigma: torch.Tensor, 
         h = neighborhood(grid_d2.unsqueeze(0), sigma[:1].view(1, 1, 1)).expand(e, -1, -1)  # (E, K, K)
     else:
         h = neighborhood(grid_d2.unsqueeze(0), sigma.view(-1, 1, 1))  # (E, K, K), symmetric
-    # one batched matrix product for numerators and denominators (the counts ride along as an
-    # extra column): no (E, K, K, D) intermediate, so a 16 x 16 ensemble costs what its members
-    # do; every member is its own product of the batch, so member e equals the solo map bitwise
-    # (tests/core check it for small and large grids)
-    both = torch.bmm(h, torch.cat([sums, counts.unsqueeze(-1)], dim=-1))  # (E, K, D + 1)
+    # one product for numerators and denominators (the counts ride along as an extra column); every
+    # member is its own product, so member e equals the solo map bitwise (tests/core check it)
+    both = fixed_order_bmm(h, torch.cat([sums, counts.unsqueeze(-1)], dim=-1))  # (E, K, D + 1)
     num, den = both[..., :-1], both[..., -1]
     return num / den.clamp_min(torch.finfo(den.dtype).tiny).unsqueeze(-1), den
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import itertools
+
+import numpy as np
 import pytest
 import torch
 
@@ -10,7 +13,7 @@ from somtorch.core.grid import grid_sqdist
 from somtorch.core.neighborhood import bubble, gaussian
 from somtorch.core import order
 from somtorch.core.order import Order
-from somtorch.core.training import _blocks, accumulate, batch_target, online_block
+from somtorch.core.training import _blocks, accumulate, batch_target, fixed_order_bmm, online_block
 
 ROWS, COLS, D = 3, 4, 2
 K = ROWS * COLS
@@ -191,3 +194,39 @@ def test_a_training_without_a_bar_logs_its_progress(mode, monkeypatch, caplog):
     with caplog.at_level(logging.INFO, logger="somtorch.core.training"):
         SOM(3, 3, 3, seed=0).fit(x, mode=mode, epochs=4, progress=True)  # a bar: no log lines
     assert not [r for r in caplog.records if "s so far" in r.getMessage()]
+
+
+def _tree_sum(values: list) -> "np.float32":
+    """The balanced tree of :func:`fixed_order_bmm`, written out on numpy scalars."""
+    while len(values) > 1:
+        half = len(values) // 2
+        values = [values[i] + values[half + i] for i in range(half)] + values[2 * half:]
+    return values[0]
+
+
+@pytest.mark.parametrize("j", [1, 2, 5, 8, 13])
+def test_fixed_order_bmm_sums_in_its_documented_order(j):
+    # every term rounded once, added as first half + second half level by level: the bits of a
+    # numpy float32 tree; no BLAS order, no chunking or thread count changes them
+    g = torch.Generator().manual_seed(j)
+    a = torch.rand(2, 3, j, generator=g) * 7
+    b = torch.rand(2, j, 4, generator=g) * 1e3
+    got = fixed_order_bmm(a, b)
+    an, bn = a.numpy(), b.numpy()
+    for e, i, c in itertools.product(range(2), range(3), range(4)):
+        want = _tree_sum([np.float32(an[e, i, t]) * np.float32(bn[e, t, c]) for t in range(j)])
+        assert got[e, i, c].item() == float(want)
+    assert torch.equal(fixed_order_bmm(a, b, chunk_elements=1), got)
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        assert torch.equal(fixed_order_bmm(a, b), got)
+    finally:
+        torch.set_num_threads(threads)
+    assert torch.allclose(got, torch.bmm(a, b), rtol=1e-5)
+
+
+def test_fixed_order_bmm_is_exact_where_the_sums_are():
+    a = torch.randint(-50, 50, (3, 40, 40), generator=torch.Generator().manual_seed(0)).double()
+    b = torch.randint(-50, 50, (3, 40, 4), generator=torch.Generator().manual_seed(1)).double()
+    assert torch.equal(fixed_order_bmm(a, b, chunk_elements=500), torch.bmm(a, b))
