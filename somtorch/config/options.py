@@ -26,7 +26,8 @@ GROUND_RULES = ("none", "position", "support", "either")
 # somtorch.tasks.objects
 OBJECT_RULES = ("salient", "paper")
 # somtorch.synth: the generator's scene families (keys of somtorch.synth.FAMILIES, in that order)
-SYNTH_FAMILIES = ("stairs", "garden", "road", "room", "tabletop", "hands", "fence", "clutter", "floor")
+SYNTH_FAMILIES = ("stairs", "garden", "road", "room", "tabletop", "hands", "fence", "clutter", "floor",
+                  "floor_near")
 # somtorch.segmenters: name -> deterministic (one run whatever ``ensemble`` says)
 METHODS: dict[str, bool] = {"som": False, "minisom": False, "kmeans": False, "slic": True, "felzenszwalb": True}
 

@@ -271,6 +271,35 @@ def floor(b: Builder, seed: int) -> Pose:
     return Pose(0.0, fy - dist * math.cos(p), h, pitch, r.uniform(-8, 8))
 
 
+def floor_near(b: Builder, seed: int) -> Pose:
+    """Things on a floor seen from above at arm's length (55°-90° down, 0.4-0.9 m high: a robot's
+    wrist camera, a phone held over the floor): one to three objects whose footprints add up to
+    30-60 % of the floor in view, so that the floor holds far less of the view than in ``floor``
+    (pre-registered in session 16, before any run of the pipeline on it: the regime of a probe in
+    which ``plane_components`` led)."""
+    r = b.rng
+    b.ground(b.material(r.choice(["wood", "ground"]), stripes=0.2))
+    pitch = 55.0 + 35.0 * ((seed * _GOLDEN + r.uniform(0, 0.04)) % 1.0)
+    p, h = math.radians(pitch), r.uniform(0.4, 0.9)
+    dist = h / math.sin(p)
+    fy = 1.0
+    half_w, half_h = (dist * n / (2 * b.camera.focal_px) for n in (b.camera.width, b.camera.height))
+    n = int(r.integers(1, 4))
+    # each object's footprint side, at most 1.6 x the shorter half view; heights at most 0.4 x the
+    # camera's: nothing reaches into the lens
+    side = min(math.sqrt(r.uniform(0.3, 0.6) * 4 * half_w * half_h / n), 1.6 * min(half_w, half_h))
+    for x, y in b.scatter(n, [side * 0.5] * n, (-max(half_w - side / 2, 0.0), max(half_w - side / 2, 0.0)),
+                          (fy - max(half_h - side / 2, 0.0), fy + max(half_h - side / 2, 0.0))):
+        yaw = r.uniform(-math.pi, math.pi)
+        if r.uniform() < 0.5:  # a parcel, a crate, a bag
+            o = b.new_object("parcel")
+            b.box_on(x, y, 0.0, (side, side * r.uniform(0.7, 1.0), min(side * r.uniform(0.15, 0.5), 0.4 * h)),
+                     o, b.material("object"), yaw)
+        else:
+            parts.small_object(b, x, y, 0.0, min(side, 0.4 * h), yaw)
+    return Pose(0.0, fy - dist * math.cos(p), h, pitch, r.uniform(-8, 8))
+
+
 def hands(b: Builder, seed: int) -> Pose:
     r = b.rng
     b.ground(b.material("ground"))
@@ -321,5 +350,6 @@ FAMILIES: dict[str, Family] = {
     "fence": Family(fence, 1.5, 12.0, 5.0),
     "clutter": Family(clutter, 1.0, 10.0, 4.0),
     "floor": Family(floor, 0.4, 2.0, 1.0),
+    "floor_near": Family(floor_near, 0.2, 1.0, 0.6),
 }
 """The families by name."""

@@ -344,7 +344,7 @@ def test_a_fresh_clone_is_told_the_command_that_generates_the_missing_frames(tmp
     specs = frames()
     line = missing_corpus(specs)
     assert line is not None and "\n" not in line
-    assert line.startswith("162 synthetic frame(s) are not generated yet")
+    assert line.startswith("180 synthetic frame(s) are not generated yet")
     cmd = line.split("`")[1]
     assert cmd == "somtorch-synth 'cameras=[oakd,kitti,middlebury]' n=6"
     cfg = SynthConfig(cameras=["oakd", "kitti", "middlebury"], n=6)  # what those overrides give

@@ -121,3 +121,20 @@ def test_bytes_do_not_depend_on_the_thread_count():
     torch.set_num_threads(4)
     b = generate_frame("garden", 5, "kitti", scale=0.25, sgbm=False)
     assert torch.equal(a.left, b.left) and torch.equal(a.right, b.right) and torch.equal(a.disparity, b.disparity)
+
+
+def test_floor_near_leaves_the_floor_less_of_the_view_than_floor():
+    # the pre-registered family of session 16: the objects cover far more of the view than in
+    # `floor` (floor share from the GT labels of the left view, 6 seeds, a quarter-size OAK-D)
+    shares = {}
+    for family in ("floor", "floor_near"):
+        s = []
+        for seed in range(6):
+            f = generate_frame(family, seed, "oakd", scale=0.25, sgbm=False)
+            valid = torch.isfinite(f.disparity)
+            s.append(1.0 - float(((f.objects > 0) & valid).sum()) / float(valid.sum()))
+            layout = draw_layout(family, seed, CAMERAS["oakd"])[0]
+            assert 55 <= layout.pose.pitch_deg <= 90
+        shares[family] = sorted(s)
+    assert shares["floor_near"][3] < shares["floor"][3] - 0.1  # medians (upper) 10 points apart
+    assert min(shares["floor_near"]) < 0.6 < min(shares["floor"])
