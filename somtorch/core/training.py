@@ -169,16 +169,17 @@ def fixed_order_bmm(a: torch.Tensor, b: torch.Tensor, *, chunk_elements: int = D
     c = b.shape[-1]
     out = torch.empty(e, m, c, dtype=torch.result_type(a, b), device=a.device)
     rows = max(1, chunk_elements // max(1, e * j * c))
+    at = a.transpose(1, 2)  # (E, J, M): the summed index leading, so every level adds contiguous blocks
     for r in range(0, m, rows):
-        terms = a[:, r:r + rows, :, None] * b[:, None]  # (E, m', J, C): one rounding each
+        terms = at[:, :, r:r + rows, None] * b[:, :, None, :]  # (E, J, m', C): one rounding each
         n = j
         while n > 1:  # in place: terms[:half] += terms[half:2 half]; an odd last term moves up
             half = n // 2
-            terms[:, :, :half] += terms[:, :, half:2 * half]
+            terms[:, :half] += terms[:, half:2 * half]
             if n % 2:
-                terms[:, :, half] = terms[:, :, n - 1]
+                terms[:, half] = terms[:, n - 1]
             n = half + n % 2
-        out[:, r:r + rows] = terms[:, :, 0]
+        out[:, r:r + rows] = terms[:, 0]
     return out
 
 
