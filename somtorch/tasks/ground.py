@@ -15,11 +15,13 @@ near a threshold depend on the seed).
 That is the ``"position"`` rule (``GroundConfig.rule``): it recognises a floor by where a forward
 camera sees it. The ``"support"`` rule recognises it by what it supports, at any camera pitch — a
 floor filling the frame of a camera looking down, a table top, a slope: RANSAC on the whole map, no
-test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels.
-The position rule also wants nothing substantial behind the plane (``max_below_frac``: a floor
-hides what lies beneath it); a support-verified plane need not pass that test (a table top holding
-most of the view has the floor beyond its edges behind it). ``"either"`` accepts a plane that
-passes one of the two (RANSAC on the lower half, as the position rule).
+test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels,
+or at least ``support_geometry`` of them while in view at the four image corners with nothing
+behind it (a floor seen at arm's length that objects cover by more than 40 %). The position rule
+also wants nothing substantial behind the plane (``max_below_frac``: a floor hides what lies
+beneath it); a plane holding ``support_frac`` need not pass that test (a table top holding most of
+the view has the floor beyond its edges behind it). ``"either"`` accepts a plane that passes one of
+the two (RANSAC on the lower half, as the position rule).
 """
 
 from __future__ import annotations
