@@ -43,11 +43,6 @@ class GroundConfig(Validated):
         support_frac: support rule: the plane holds at least this share of the valid pixels (a
             floor or table top filling the view; a forward camera's floor holds 14–40 %, the
             far-room slab of oakd_pov_controllers 55 %: docs/method.md).
-        support_geometry: support rule, for a plane holding less than ``support_frac``: it is the
-            support too where it holds at least this share of the valid pixels, is in view at the
-            four image corners (plane disparity > band there: the camera looks down at it) and
-            has nothing behind it (``max_below_frac``): a floor seen at arm's length that objects
-            cover by up to 80 % (session 16, the protocol's second path; 0 = the share test alone).
         max_below_frac: position rule: a floor hides what lies beneath it, so at most this share of
             the valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
             (disparity below the band); a ramp, a lattice or a plane through the objects fails
@@ -63,7 +58,6 @@ class GroundConfig(Validated):
         "noise_band": NON_NEGATIVE, "min_inlier_frac": Interval(0, 1, open_lo=True),
         "min_slope_frac": NON_NEGATIVE, "max_below_frac": FRACTION, "iterations": POSITIVE_INT,
         "sample": POSITIVE_INT, "support_frac": Interval(0, 1, open_lo=True),
-        "support_geometry": FRACTION,
     }
 
     rule: str = "either"
@@ -75,7 +69,6 @@ class GroundConfig(Validated):
     iterations: int = 400
     sample: int = 5000
     support_frac: float = 0.6
-    support_geometry: float = 0.2
     noise_band: float = 2.0
 
 

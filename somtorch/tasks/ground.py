@@ -15,13 +15,11 @@ near a threshold depend on the seed).
 That is the ``"position"`` rule (``GroundConfig.rule``): it recognises a floor by where a forward
 camera sees it. The ``"support"`` rule recognises it by what it supports, at any camera pitch — a
 floor filling the frame of a camera looking down, a table top, a slope: RANSAC on the whole map, no
-test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels,
-or at least ``support_geometry`` of them while in view at the four image corners with nothing
-behind it (a floor seen at arm's length that objects cover by more than 40 %). The position rule
-also wants nothing substantial behind the plane (``max_below_frac``: a floor hides what lies
-beneath it); a plane holding ``support_frac`` need not pass that test (a table top holding most of
-the view has the floor beyond its edges behind it). ``"either"`` accepts a plane that passes one of
-the two (RANSAC on the lower half, as the position rule).
+test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels.
+The position rule also wants nothing substantial behind the plane (``max_below_frac``: a floor
+hides what lies beneath it); a support-verified plane need not pass that test (a table top holding
+most of the view has the floor beyond its edges behind it). ``"either"`` accepts a plane that
+passes one of the two (RANSAC on the lower half, as the position rule).
 """
 
 from __future__ import annotations
@@ -139,7 +137,7 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     allyx = ok.nonzero()
     pa = allyx[torch.randint(allyx.shape[0], (min(cfg.sample, allyx.shape[0]),), generator=g)]
     q = torch.stack([pa[:, 1].double(), pa[:, 0].double(), disparity[pa[:, 0], pa[:, 1]].double()], 1)
-    score = score.masked_fill(~_passes_sampled(coef, q, tol, h, w, oriented, cfg), -1)
+    score = score.masked_fill(~_passes_sampled(coef, q, tol, h, oriented, cfg), -1)
     best = int(torch.argmax(score))  # the first of the best: argmax returns the lowest index of ties
     if int(score[best]) < 0:
         return None
@@ -175,8 +173,8 @@ def _predict(coef: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:
     return c[:, 0:1] * x + c[:, 1:2] * y + c[:, 2:3]
 
 
-def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, w: int,
-                    oriented: torch.Tensor, cfg: GroundConfig) -> torch.Tensor:
+def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, oriented: torch.Tensor,
+                    cfg: GroundConfig) -> torch.Tensor:
     """Which hypotheses ``coef`` ``(I, 3)`` pass the tests of ``cfg.rule`` on the sample ``q``
     ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated).
     ``oriented`` ``(I,)``: the hypotheses that pass the position rule's orientation test."""
@@ -185,21 +183,12 @@ def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, w: 
     inl = (pred - d).abs() < tol
     share = inl.float().mean(1)
     ok = share >= cfg.min_inlier_frac
-    hides = torch.ones_like(ok)  # a floor hides what lies beneath it
+    hides = torch.ones_like(ok)  # the position rule's floor hides what lies beneath it
     if cfg.max_below_frac < 1.0:
         seen = pred > tol
         behind = seen & (d < pred - tol)
         hides = behind.sum(1) <= cfg.max_below_frac * seen.sum(1).clamp_min(1)
-    support = share >= cfg.support_frac
-    if cfg.support_geometry > 0:  # or a smaller share, in view at the four corners, nothing behind
-        corners = torch.stack(_corners(coef[:, 0], coef[:, 1], coef[:, 2], h, w), 1)  # (I, 4)
-        support |= (share >= cfg.support_geometry) & (corners > tol).all(1) & hides
-    return ok & _either(cfg.rule, oriented & hides, support)
-
-
-def _corners(a, b, c, h: int, w: int) -> tuple:
-    """The plane ``d = a·x + b·y + c``'s disparity at the four image corners (floats or tensors)."""
-    return c, a * (w - 1) + c, b * (h - 1) + c, a * (w - 1) + b * (h - 1) + c
+    return ok & _either(cfg.rule, oriented & hides, share >= cfg.support_frac)
 
 
 def _either(rule: str, position, support):
@@ -245,16 +234,11 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     frac = int(mask.sum()) / n_valid
     if frac < cfg.min_inlier_frac:
         return None
-    def hides() -> bool:  # at most max_below_frac of the pixels where the plane is in view behind it
-        seen = ok & (plane > tol)
+    if position and cfg.max_below_frac < 1.0:  # share of the pixels where the plane is in view behind it
+        seen = ok & (plane > tol)  # where the plane is in view
         behind = seen & (d < plane - tol)
-        return int(behind.sum()) <= cfg.max_below_frac * max(int(seen.sum()), 1)
-
-    if position and cfg.max_below_frac < 1.0:
-        position = hides()
+        position = int(behind.sum()) <= cfg.max_below_frac * max(int(seen.sum()), 1)
     support = cfg.rule != "position" and frac >= cfg.support_frac
-    if cfg.rule != "position" and not support and 0 < cfg.support_geometry <= frac:
-        support = min(_corners(a, b, c, h, w)) > tol and (cfg.max_below_frac >= 1.0 or hides())
     if not _either(cfg.rule, position, support):
         return None
     return GroundPlane(a, b, c, tol, mask, frac, support)
