@@ -19,7 +19,8 @@ class GroundConfig(Validated):
     Verification (``rule``): ``"none"`` — no ground handling (the paper's pipeline);
     ``"position"`` — where a forward camera sees its floor (``min_slope_frac``, tilt in x ≤ tilt in
     y; RANSAC on the lower image half); ``"support"`` — by what the plane supports, at any camera
-    pitch (``support_frac`` of the pixels on it; RANSAC on the whole map);
+    pitch (``support_frac`` of the pixels on it, or of the view's rim with nothing behind it; RANSAC
+    on the whole map);
     ``"either"`` — a plane passing either (RANSAC on the lower half). Every rule needs
     ``min_inlier_frac``; the position rule also ``max_below_frac`` (nothing substantial behind the
     plane), which a support-verified plane need not pass: a table top holding most of the view
@@ -42,11 +43,16 @@ class GroundConfig(Validated):
             Position rule (with tilt in x ≤ tilt in y).
         support_frac: support rule: the plane holds at least this share of the valid pixels (a
             floor or table top filling the view; a forward camera's floor holds 14–40 %, the
-            far-room slab of oakd_pov_controllers 55 %: docs/method.md).
+            far-room slab of oakd_pov_controllers 55 %: docs/method.md) — or at least this share of
+            the view's rim (:func:`~somtorch.tasks.ground.view_rim`) while passing the behind test
+            of ``max_below_frac``: a floor seen from above surrounds what it supports, however much
+            of the view the things on it fill, while a back wall above a floor or a room's floor
+            below its walls holds about half of the rim (figures: docs/method.md).
         max_below_frac: position rule: a floor hides what lies beneath it, so at most this share of
             the valid pixels where the plane is in view (plane disparity > band) may lie *behind* it
             (disparity below the band); a ramp, a lattice or a plane through the objects fails
-            (1 = no check). A plane the support rule verifies is exempt (docs/tuned_constants.md).
+            (1 = no check). A plane the support rule verifies by its pixel share is exempt
+            (docs/tuned_constants.md); one it verifies by the rim is not.
         iterations: RANSAC hypotheses.
         sample: pixels drawn for RANSAC and for the tests (estimated on a sample for every
             hypothesis: the best plane that passes them is found, not the best plane refused).

@@ -15,11 +15,14 @@ near a threshold depend on the seed).
 That is the ``"position"`` rule (``GroundConfig.rule``): it recognises a floor by where a forward
 camera sees it. The ``"support"`` rule recognises it by what it supports, at any camera pitch — a
 floor filling the frame of a camera looking down, a table top, a slope: RANSAC on the whole map, no
-test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels.
-The position rule also wants nothing substantial behind the plane (``max_below_frac``: a floor
-hides what lies beneath it); a support-verified plane need not pass that test (a table top holding
-most of the view has the floor beyond its edges behind it). ``"either"`` accepts a plane that
-passes one of the two (RANSAC on the lower half, as the position rule).
+test of orientation or image position; the plane must hold ``support_frac`` of the valid pixels,
+or ``support_frac`` of the view's rim (:func:`view_rim`) with nothing substantial behind it: a floor
+seen from above surrounds the things on it, so it holds most of the rim however much of the view
+they fill. The position rule also wants nothing substantial behind the plane (``max_below_frac``: a
+floor hides what lies beneath it); a plane verified by its share of the pixels need not pass that
+test (a table top holding most of the view has the floor beyond its edges behind it).
+``"either"`` accepts a plane that passes one of the two (RANSAC on the lower half, as the position
+rule).
 """
 
 from __future__ import annotations
@@ -137,7 +140,10 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     allyx = ok.nonzero()
     pa = allyx[torch.randint(allyx.shape[0], (min(cfg.sample, allyx.shape[0]),), generator=g)]
     q = torch.stack([pa[:, 1].double(), pa[:, 0].double(), disparity[pa[:, 0], pa[:, 1]].double()], 1)
-    score = score.masked_fill(~_passes_sampled(coef, q, tol, h, oriented, cfg), -1)
+    ryx = view_rim(ok).nonzero()
+    pr = ryx[torch.randint(ryx.shape[0], (min(cfg.sample, ryx.shape[0]),), generator=g)]
+    r = torch.stack([pr[:, 1].double(), pr[:, 0].double(), disparity[pr[:, 0], pr[:, 1]].double()], 1)
+    score = score.masked_fill(~_passes_sampled(coef, q, r, tol, oriented, cfg), -1)
     best = int(torch.argmax(score))  # the first of the best: argmax returns the lowest index of ties
     if int(score[best]) < 0:
         return None
@@ -173,22 +179,37 @@ def _predict(coef: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:
     return c[:, 0:1] * x + c[:, 1:2] * y + c[:, 2:3]
 
 
-def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, tol: float, h: int, oriented: torch.Tensor,
-                    cfg: GroundConfig) -> torch.Tensor:
+def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, rim: torch.Tensor, tol: float,
+                    oriented: torch.Tensor, cfg: GroundConfig) -> torch.Tensor:
     """Which hypotheses ``coef`` ``(I, 3)`` pass the tests of ``cfg.rule`` on the sample ``q``
-    ``(N, 3)`` rows (x, y, d) of the whole map (the full-map tests of :func:`_verified`, estimated).
+    ``(N, 3)`` rows (x, y, d) of the whole map and ``rim`` ``(M, 3)`` of the view's rim (the
+    full-map tests of :func:`_verified`, estimated).
     ``oriented`` ``(I,)``: the hypotheses that pass the position rule's orientation test."""
     pred = _predict(coef, q)  # (I, N)
     d = q[None, :, 2].float()
     inl = (pred - d).abs() < tol
     share = inl.float().mean(1)
     ok = share >= cfg.min_inlier_frac
-    hides = torch.ones_like(ok)  # the position rule's floor hides what lies beneath it
-    if cfg.max_below_frac < 1.0:
-        seen = pred > tol
-        behind = seen & (d < pred - tol)
-        hides = behind.sum(1) <= cfg.max_below_frac * seen.sum(1).clamp_min(1)
-    return ok & _either(cfg.rule, oriented & hides, share >= cfg.support_frac)
+    seen = pred > tol
+    behind = seen & (d < pred - tol)
+    hides = behind.sum(1) <= cfg.max_below_frac * seen.sum(1).clamp_min(1)  # a floor hides what lies beneath
+    on_rim = ((_predict(coef, rim) - rim[None, :, 2].float()).abs() < tol).float().mean(1)
+    surrounds = (on_rim >= cfg.support_frac) & hides
+    return ok & _either(cfg.rule, oriented & hides, (share >= cfg.support_frac) | surrounds)
+
+
+def view_rim(ok: torch.Tensor) -> torch.Tensor:
+    """The rim of the view ``(H, W)`` bool: the first and last valid pixel of every row and of every
+    column of ``ok`` (where the map's view ends: an SGBM map's invalid margin does not count)."""
+    h, w = ok.shape
+    rim = torch.zeros_like(ok)
+    rows = ok.any(1).nonzero().squeeze(1)
+    cols = ok.any(0).nonzero().squeeze(1)
+    rim[rows, ok.int().argmax(1)[rows]] = True
+    rim[rows, w - 1 - ok.flip(1).int().argmax(1)[rows]] = True
+    rim[ok.int().argmax(0)[cols], cols] = True
+    rim[h - 1 - ok.flip(0).int().argmax(0)[cols], cols] = True
+    return rim
 
 
 def _either(rule: str, position, support):
@@ -199,8 +220,8 @@ def _either(rule: str, position, support):
 def _verified(best: torch.Tensor, pts: torch.Tensor, disparity: torch.Tensor, ok: torch.Tensor, n_valid: int,
               tol: float, min_b: float, cfg: GroundConfig) -> GroundPlane | None:
     """Hypothesis ``best`` refined by least squares on its inliers among ``pts`` and tested on the
-    full map (:func:`verify_plane`) — inlier share and scene behind it for every rule; slope, tilt
-    and inliers in the top third (position rule); inlier share (support rule) — or None."""
+    full map (:func:`verify_plane`) — inlier share and scene behind it for every rule; slope and
+    tilt (position rule); share of the pixels or of the rim (support rule) — or None."""
     # refine by least squares on the inliers of the sampled pixels, then recompute on the full map
     inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
     if int(inl.sum()) >= 3:
@@ -234,11 +255,16 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     frac = int(mask.sum()) / n_valid
     if frac < cfg.min_inlier_frac:
         return None
-    if position and cfg.max_below_frac < 1.0:  # share of the pixels where the plane is in view behind it
-        seen = ok & (plane > tol)  # where the plane is in view
-        behind = seen & (d < plane - tol)
-        position = int(behind.sum()) <= cfg.max_below_frac * max(int(seen.sum()), 1)
-    support = cfg.rule != "position" and frac >= cfg.support_frac
+    seen = ok & (plane > tol)  # where the plane is in view, and the share of it behind the plane
+    hides = int((seen & (d < plane - tol)).sum()) <= cfg.max_below_frac * max(int(seen.sum()), 1)
+    position = position and hides
+    if cfg.rule == "position":
+        support = False
+    elif frac >= cfg.support_frac:
+        support = True
+    else:  # a floor seen from above surrounds what it supports: it holds most of the view's rim
+        rim = view_rim(ok)
+        support = hides and int((mask & rim).sum()) >= cfg.support_frac * max(int(rim.sum()), 1)
     if not _either(cfg.rule, position, support):
         return None
     return GroundPlane(a, b, c, tol, mask, frac, support)

@@ -8,7 +8,7 @@ import torch
 from somtorch.config import GroundConfig
 from somtorch.evaluation import ground_object_share
 from somtorch.disparity.scene import scene_from_arrays
-from somtorch.tasks.ground import fit_ground_plane
+from somtorch.tasks.ground import fit_ground_plane, view_rim
 
 H, W = 120, 160
 
@@ -164,3 +164,16 @@ def test_a_map_of_pure_noise_is_not_cut_by_a_band_as_wide_as_its_noise():
     for rule in ("support", "either"):
         plane = fit_ground_plane(d, valid, GroundConfig(rule=rule))
         assert plane is None or (plane.tol < 2.0 and plane.inlier_frac < 0.2), (rule, plane)
+
+
+def test_the_view_rim_is_where_the_valid_view_ends_not_the_image_border():
+    # an SGBM map has no disparity in its left columns: the rim runs along the first valid column
+    valid = torch.ones(6, 8, dtype=torch.bool)
+    valid[:, :3] = False
+    valid[2, 5] = False  # a hole inside the view is not its rim
+    rim = view_rim(valid)
+    expected = torch.zeros(6, 8, dtype=torch.bool)
+    expected[0, 3:] = expected[-1, 3:] = True
+    expected[:, 3] = expected[:, -1] = True
+    assert torch.equal(rim, expected)
+    assert not view_rim(torch.zeros(4, 4, dtype=torch.bool)).any()

@@ -15,7 +15,7 @@ from somtorch.config import FeatureConfig, GroundConfig, PipelineConfig
 from somtorch.core import SOM
 from somtorch.disparity.features import make_features, relative_disparity
 from somtorch.disparity.scene import scene_from_arrays
-from somtorch.tasks.ground import fit_ground_plane, verify_plane
+from somtorch.tasks.ground import fit_ground_plane, verify_plane, view_rim
 from somtorch.tasks.segmentation import segment
 
 H, W = 120, 160
@@ -129,13 +129,49 @@ def test_a_plane_cutting_through_a_large_object_is_refused():
 
 def test_the_support_rule_finds_the_floor_under_an_object_a_third_of_the_image():
     # a floor from above under one object covering a third of the image: the floor is the support
-    # plane when it holds enough of the pixels, the object stays out of its mask
+    # plane by the share of the pixels it holds (63 %) or, where support_frac asks for more, by the
+    # share of the view's rim it holds (all of it: it surrounds what it supports); the object stays
+    # out of its mask
     d, valid, objects = render(90, [(-0.25, 0.25, -0.2, 0.2, 0.2)])
     obj = objects > 0
     assert 0.3 < float(obj.float().mean()) < 0.4
-    g = fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.4))
+    for frac in (0.4, 0.7):
+        g = fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=frac))
+        assert g is not None and g.support and int((g.mask & obj).sum()) <= 0.03 * int(obj.sum())
+        assert 0.6 < g.inlier_frac < 0.7
+    rim = view_rim(valid)
+    assert int((g.mask & rim).sum()) == int(rim.sum())
+
+
+def test_a_floor_that_does_not_surround_the_object_needs_the_pixel_share():
+    # a box across the whole width of a view from above: the floor holds 56 % of the pixels and 53 %
+    # of the rim, so support_frac 0.6 refuses it by both readings and 0.5 verifies it
+    d, valid, objects = render(90, [(-2, 2, 0.05, 2, 0.2)])
+    obj = objects > 0
+    rim = view_rim(valid)
+    floor = valid & ~obj
+    assert 0.5 < int((floor & rim).sum()) / int(rim.sum()) < 0.6
+    assert fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.6)) is None
+    g = fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.5))
     assert g is not None and g.support and int((g.mask & obj).sum()) <= 0.03 * int(obj.sum())
-    assert fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.7)) is None  # it holds < 70 %
+
+
+@pytest.mark.parametrize("rule", ["support", "either"])
+def test_a_plane_holding_the_rim_must_hide_what_lies_beneath_it(rule):
+    # a surface holding the whole rim and 55 % of the pixels, round a hole: what the hole shows in
+    # front of it stands on it (verified by the rim); what it shows behind it (a frame round a far
+    # view) is not supported by it, and the rim does not verify it
+    cfg = GroundConfig(rule=rule)
+    ys, xs = torch.meshgrid(torch.arange(H), torch.arange(W), indexing="ij")
+    plane = 20.0 + 0.05 * ys  # tilted towards the bottom, as a floor seen slightly forward
+    hole = (ys - H / 2).abs() < 0.67 * H / 2
+    hole &= (xs - W / 2).abs() < 0.67 * W / 2
+    valid = torch.ones(H, W, dtype=torch.bool)
+    assert 0.4 < float(hole.float().mean()) < 0.5
+    for inside, verified in ((45.0, True), (8.0, False)):
+        d = torch.where(hole, torch.full((H, W), inside), plane).float()
+        g = verify_plane((0.0, 0.05, 20.0), d, valid, 0.5, cfg)
+        assert (g is not None and g.support) == verified, inside
 
 
 def _object_neuron(d_mode: str, pitch: float) -> tuple[float, float]:
