@@ -154,6 +154,7 @@ def test_a_floor_that_does_not_surround_the_object_needs_the_pixel_share():
     assert fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.6)) is None
     g = fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.5))
     assert g is not None and g.support and int((g.mask & obj).sum()) <= 0.03 * int(obj.sum())
+    assert 0.5 < g.inlier_frac < 0.6
 
 
 @pytest.mark.parametrize("rule", ["support", "either"])
