@@ -240,7 +240,8 @@ def on_support(scene: Scene, ground: GroundPlane | None,
         return scene, ground
     h, w = scene.disparity.shape
     height = relative_disparity(scene.disparity, ground.disparity(h, w))
-    level = GroundPlane(0.0, 0.0, 0.0, ground.tol, ground.mask, ground.inlier_frac, ground.support)
+    level = GroundPlane(0.0, 0.0, 0.0, ground.tol, ground.mask, ground.inlier_frac, ground.support,
+                        ground.rim_frac)
     return replace(scene, disparity=height), level
 
 
@@ -358,7 +359,7 @@ def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg
         return scene.disparity, scene.valid, labels, ground, cfg
     g = None if ground is None else GroundPlane(ground.a * s, ground.b * s, ground.c, ground.tol,
                                                 ground.mask[::s, ::s].contiguous(), ground.inlier_frac,
-                                                ground.support)
+                                                ground.support, ground.rim_frac)
     return (scene.disparity[::s, ::s].contiguous(), scene.valid[::s, ::s].contiguous(),
             labels[:, ::s, ::s].contiguous(), g, cfg)
 

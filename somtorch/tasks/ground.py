@@ -40,7 +40,8 @@ from ..validation import check_tensor
 @dataclass
 class GroundPlane:
     """A fitted ground plane ``d = a·x + b·y + c`` and its inlier mask ``(H, W)``; ``support``: the
-    support test verified it (rules ``"support"`` and ``"either"``), not only the position test."""
+    support test verified it (rules ``"support"`` and ``"either"``), not only the position test;
+    ``rim_frac``: the share of the view's rim (:func:`view_rim`) in its band (None: not measured)."""
 
     a: float
     b: float
@@ -49,6 +50,7 @@ class GroundPlane:
     mask: torch.Tensor
     inlier_frac: float
     support: bool = False
+    rim_frac: float | None = None
 
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
@@ -63,10 +65,10 @@ class GroundPlane:
         return self._cache[key]
 
     def as_dict(self) -> dict:
-        """The plane's coefficients, tolerance, inlier share and support flag as a dict (for
-        ``metrics.json``)."""
+        """The plane's coefficients, tolerance, inlier share, share of the view's rim and support
+        flag as a dict (for ``metrics.json``)."""
         return {"a": self.a, "b": self.b, "c": self.c, "tol": self.tol, "inlier_frac": self.inlier_frac,
-                "support": self.support}
+                "rim_frac": self.rim_frac, "support": self.support}
 
 
 def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundConfig | None = None, *,
@@ -258,16 +260,20 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     seen = ok & (plane > tol)  # where the plane is in view, and the share of it behind the plane
     hides = int((seen & (d < plane - tol)).sum()) <= cfg.max_below_frac * max(int(seen.sum()), 1)
     position = position and hides
-    if cfg.rule == "position":
-        support = False
-    elif frac >= cfg.support_frac:
-        support = True
-    else:  # a floor seen from above surrounds what it supports: it holds most of the view's rim
-        rim = view_rim(ok)
-        support = hides and int((mask & rim).sum()) >= cfg.support_frac * max(int(rim.sum()), 1)
+    rim_frac = rim_share(mask, ok)
+    # a floor seen from above surrounds what it supports: it holds most of the view's rim
+    surrounds = hides and rim_frac >= cfg.support_frac
+    support = cfg.rule != "position" and (frac >= cfg.support_frac or surrounds)
     if not _either(cfg.rule, position, support):
         return None
-    return GroundPlane(a, b, c, tol, mask, frac, support)
+    return GroundPlane(a, b, c, tol, mask, frac, support, rim_frac)
+
+
+def rim_share(mask: torch.Tensor, ok: torch.Tensor) -> float:
+    """The share of the view's rim (:func:`view_rim` of ``ok``) that ``mask`` holds (0 without a
+    rim). Shape: ``mask``, ``ok`` ``(H, W)``."""
+    rim = view_rim(ok)
+    return int((mask & rim).sum()) / max(int(rim.sum()), 1)
 
 
 def _plane_fit(pts: torch.Tensor) -> torch.Tensor:

@@ -139,6 +139,7 @@ def test_the_support_rule_finds_the_floor_under_an_object_a_third_of_the_image()
         g = fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=frac))
         assert g is not None and g.support and int((g.mask & obj).sum()) <= 0.03 * int(obj.sum())
         assert 0.6 < g.inlier_frac < 0.7
+        assert g.rim_frac == 1.0 and g.as_dict()["rim_frac"] == 1.0  # reported in metrics.json
     rim = view_rim(valid)
     assert int((g.mask & rim).sum()) == int(rim.sum())
 
@@ -154,7 +155,7 @@ def test_a_floor_that_does_not_surround_the_object_needs_the_pixel_share():
     assert fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.6)) is None
     g = fit_ground_plane(d, valid, GroundConfig(rule="support", support_frac=0.5))
     assert g is not None and g.support and int((g.mask & obj).sum()) <= 0.03 * int(obj.sum())
-    assert 0.5 < g.inlier_frac < 0.6
+    assert 0.5 < g.inlier_frac < 0.6 and 0.5 < g.rim_frac < 0.6
 
 
 @pytest.mark.parametrize("rule", ["support", "either"])
