@@ -100,8 +100,9 @@ class AreaConfig(Validated):
         rule: ``"salient"``: neurons link where their segments share a boundary in the image (at
             least ``min_boundary``), the spread is the 5th–95th percentile of the map's disparity,
             the areas in front of their surroundings are ranked by contrast ×
-            ``area_frac ** size_power`` and up to ``max_areas`` are kept; when no candidate passes
-            the checks below, the whole map is kept (flagged ``no_object``).
+            ``area_frac ** size_power`` (on a map whose support plane was verified and cut, by
+            size × nearness: ``area_frac ×`` mean disparity) and up to ``max_areas`` are kept; when
+            no candidate passes the checks below, the whole map is kept (flagged ``no_object``).
             ``"paper"``: the paper read literally: neurons adjacent on the SOM grid (one step along
             a row or a column), the spread is the full range d_max − d_min, the nearest area (largest
             mean disparity) is kept, always.
@@ -123,7 +124,8 @@ class AreaConfig(Validated):
     rule only; no field: see ``docs/tuned_constants.md``).
 
     Selection — which areas are kept (``salient`` rule):
-        size_power: weight of the area's size in the ranking (0 = contrast alone).
+        size_power: weight of the area's size in the ranking (0 = contrast alone; not used on a
+            support-verified map, ranked by size × nearness).
         max_areas: how many areas are kept at most.
         keep_budget: a further area is kept only if the union of the kept boxes then holds at most
             this share of the valid pixels (the data-reduction budget: every salient area that

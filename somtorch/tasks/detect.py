@@ -243,15 +243,16 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     Shape:
         ``labels`` ``(H, W)``.
     """
-    ranked = select_areas(areas, stats, cfg)
+    on_support = ctx.islands is not None  # a support-verified plane was cut: size × nearness
+    ranked = select_areas(areas, stats, cfg, on_support=on_support)
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first, n_areas = [], None, 0
     square = _square(labels.shape, cfg.solidity_size, 1)
-    best = max((rank_score(a, cfg) for a in ranked), default=0.0)
+    best = max((rank_score(a, cfg, on_support=on_support) for a in ranked), default=0.0)
     for cand in ranked:
         if bool(taken[torch.tensor(cand.neurons)].any()):
             continue
-        confidence = rank_score(cand, cfg) / best if best > 0 else 1.0
+        confidence = rank_score(cand, cfg, on_support=on_support) / best if best > 0 else 1.0
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
                                 exclude=taken)[0]
         # every check reads the window of the area's segments (their box, widened by half the

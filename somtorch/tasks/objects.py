@@ -23,7 +23,9 @@ Linking and selection follow ``AreaConfig.rule``:
   it in a forward view — it says nothing about the object's salience and is left out. Without
   that, an object the ground cut isolates from every segment had no contrast at all. The areas in
   front of their surroundings (contrast ≥ 0) are ranked by contrast × ``area_frac ** size_power``,
-  at most ``max_areas``.
+  at most ``max_areas``; on a map whose support plane was verified and cut (``on_support``: what
+  is left stands on it) by size × nearness, ``area_frac ×`` mean disparity — the biggest nearest
+  thing on the support, the ``plane_components`` baseline's choice (session 17, docs/validation.md).
 
 What happens to the selected areas afterwards (joining adjacent segments, box refinement, growing,
 the purity test) is in :mod:`somtorch.tasks.refine`; :func:`~somtorch.tasks.detect.kept_areas` runs
@@ -357,19 +359,25 @@ def areas_of(comps: list[list[int]], stats: NeuronStats) -> list[ObjectArea]:
     return areas
 
 
-def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | None = None) -> list[ObjectArea]:
-    """The kept areas, best first, with ``rank`` set (see the module docstring)."""
+def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | None = None, *,
+                 on_support: bool = False) -> list[ObjectArea]:
+    """The kept areas, best first, with ``rank`` set (see the module docstring; ``on_support``: the
+    map's support plane was verified and cut, :func:`rank_score`)."""
     cfg = cfg or AreaConfig()
     if cfg.rule == "paper":
         ranked = sorted(areas, key=lambda a: -a.mean_disparity)[:1]
     else:
         ok = [a for a in areas if a.contrast >= 0]  # in front of its surroundings, or not salient
-        ranked = sorted(ok, key=lambda a: -rank_score(a, cfg))[:cfg.max_areas]
+        ranked = sorted(ok, key=lambda a: -rank_score(a, cfg, on_support=on_support))
+        ranked = ranked[:cfg.max_areas]
     for i, a in enumerate(ranked):
         a.rank = i
     return ranked
 
 
-def rank_score(area: ObjectArea, cfg: AreaConfig) -> float:
-    """The salient ranking's score: ``contrast × area_frac ** size_power``."""
+def rank_score(area: ObjectArea, cfg: AreaConfig, *, on_support: bool = False) -> float:
+    """The salient ranking's score: ``contrast × area_frac ** size_power``; on a map whose support
+    plane was verified and cut (``on_support``), ``area_frac ×`` mean disparity (size × nearness)."""
+    if on_support:
+        return area.area_frac * area.mean_disparity
     return area.contrast * area.area_frac ** cfg.size_power

@@ -65,6 +65,22 @@ def test_a_dataset_losing_more_than_the_margin_blocks_adoption_even_with_a_clear
     assert any("syn loses" in r for r in d.reasons)
 
 
+def test_a_loss_of_exactly_the_margin_is_not_more_than_it_after_float_rounding():
+    # 6 of 60 runs lost in a 12-frame dataset: the mean of the per-frame differences reads
+    # -0.10000000000000002, which is a loss of 10 points, not more than the 10-point margin
+    t = _table({"a": 12, "syn": 12}, [True, False])
+    base = np.full(24, 0.6)
+    cand = base.copy()
+    cand[12:18] -= 0.2  # 6 frames of 5 runs lose one run each
+    loss = t.per_dataset(cand - base)["syn"]
+    assert loss < -0.1 and loss == pytest.approx(-0.1)  # the rounding this test is about
+    d = decide(t, cand, base, cand, base)
+    assert d.non_inferior and not any("loses" in r for r in d.reasons), d
+    cand[18] -= 0.2  # one run more is more than the margin
+    d = decide(t, cand, base, cand, base)
+    assert not d.non_inferior and any("syn loses" in r for r in d.reasons), d
+
+
 def test_a_gain_in_one_frame_of_a_one_scene_dataset_is_not_certain():
     # dataset "k" holds one scene in two versions (one group): its frames become the units
     t = FrameTable(["k", "k"] + ["m"] * 10, ["s", "s"] + [f"m{i}" for i in range(10)], [True] * 12, n_boot=2000)
