@@ -33,7 +33,7 @@ from .core.threads import contended
 from .disparity.scene import Scene
 from .pipeline import MemberResult, _denoise, _Timer, detect, map_stride, on_support, prepare
 from .segmenters import Segmentation, _from_prototypes, run_segmenter
-from .tasks.ground import GroundPlane, fit_ground_plane, rim_share
+from .tasks.ground import GroundPlane, fit_ground_plane, rim_share, view_rim
 from .tasks.segmentation import segment
 
 __all__ = ["FrameResult", "SequenceRunner", "iter_sequence", "pan_sequence"]
@@ -97,7 +97,8 @@ class SequenceRunner:
             share = float(mask.sum()) / max(int(valid.sum()), 1)
             if share >= self.ground_keep * g.inlier_frac:
                 self._ground_age += 1
-                plane = GroundPlane(g.a, g.b, g.c, g.tol, mask, share, g.support, rim_share(mask, valid))
+                rim_frac = rim_share(mask, view_rim(valid))
+                plane = GroundPlane(g.a, g.b, g.c, g.tol, mask, share, g.support, rim_frac)
                 plane._cache = g._cache  # the same plane: its disparity map is not recomputed
                 return plane, True
         g = fit_ground_plane(scene.disparity, valid, cfg, sigma=sigma)

@@ -115,8 +115,7 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     yx = lower.nonzero()
     if yx.shape[0] < 10:
         return None
-    pick = yx[torch.randint(yx.shape[0], (min(cfg.sample, yx.shape[0]),), generator=g)]
-    pts = torch.stack([pick[:, 1].double(), pick[:, 0].double(), disparity[pick[:, 0], pick[:, 1]].double()], 1)
+    pts = _sample(yx, disparity, cfg.sample, g)
     # RANSAC: all hypotheses at once
     tri = torch.randint(pts.shape[0], (cfg.iterations, 3), generator=g)
     p = pts[tri]  # (I, 3, 3) rows (x, y, d)
@@ -139,17 +138,22 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     # for every hypothesis: the best plane that passes them, not the best plane, is tested on the
     # full map (a single best hypothesis near a test's threshold made the verdict a lottery of the
     # RANSAC seed)
-    allyx = ok.nonzero()
-    pa = allyx[torch.randint(allyx.shape[0], (min(cfg.sample, allyx.shape[0]),), generator=g)]
-    q = torch.stack([pa[:, 1].double(), pa[:, 0].double(), disparity[pa[:, 0], pa[:, 1]].double()], 1)
-    ryx = view_rim(ok).nonzero()
-    pr = ryx[torch.randint(ryx.shape[0], (min(cfg.sample, ryx.shape[0]),), generator=g)]
-    r = torch.stack([pr[:, 1].double(), pr[:, 0].double(), disparity[pr[:, 0], pr[:, 1]].double()], 1)
-    score = score.masked_fill(~_passes_sampled(coef, q, r, tol, oriented, cfg), -1)
+    q = _sample(ok.nonzero(), disparity, cfg.sample, g)
+    rim = view_rim(ok)
+    score = score.masked_fill(~_passes_sampled(coef, q, _sample(rim.nonzero(), disparity, cfg.sample, g), tol,
+                                               oriented, cfg), -1)
     best = int(torch.argmax(score))  # the first of the best: argmax returns the lowest index of ties
     if int(score[best]) < 0:
         return None
-    return _verified(coef[best], pts, disparity, ok, n_valid, tol, min_b, cfg)
+    return _verified(coef[best], pts, disparity, ok, n_valid, tol, min_b, cfg, rim)
+
+
+def _sample(yx: torch.Tensor, disparity: torch.Tensor, n: int, g: torch.Generator) -> torch.Tensor:
+    """``n`` of the pixels ``yx`` ``(P, 2)`` drawn with replacement by ``g``, as rows (x, y, d)
+    ``(min(n, P), 3)`` float64."""
+    pick = yx[torch.randint(yx.shape[0], (min(n, yx.shape[0]),), generator=g)]
+    ys, xs = pick[:, 0], pick[:, 1]
+    return torch.stack([xs.double(), ys.double(), disparity[ys, xs].double()], 1)
 
 
 def noise_sigma(disparity: torch.Tensor, valid: torch.Tensor) -> float:
@@ -220,7 +224,7 @@ def _either(rule: str, position, support):
 
 
 def _verified(best: torch.Tensor, pts: torch.Tensor, disparity: torch.Tensor, ok: torch.Tensor, n_valid: int,
-              tol: float, min_b: float, cfg: GroundConfig) -> GroundPlane | None:
+              tol: float, min_b: float, cfg: GroundConfig, rim: torch.Tensor) -> GroundPlane | None:
     """Hypothesis ``best`` refined by least squares on its inliers among ``pts`` and tested on the
     full map (:func:`verify_plane`) — inlier share and scene behind it for every rule; slope and
     tilt (position rule); share of the pixels or of the rim (support rule) — or None."""
@@ -228,17 +232,20 @@ def _verified(best: torch.Tensor, pts: torch.Tensor, disparity: torch.Tensor, ok
     inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
     if int(inl.sum()) >= 3:
         best = _plane_fit(pts[inl])
-    return verify_plane(tuple(float(v) for v in best), disparity, ok, tol, cfg, min_b=min_b, n_valid=n_valid)
+    return verify_plane(tuple(float(v) for v in best), disparity, ok, tol, cfg, min_b=min_b, n_valid=n_valid,
+                        rim=rim)
 
 
 def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: torch.Tensor, tol: float,
-                 cfg: GroundConfig, *, min_b: float = 0.0, n_valid: int | None = None) -> GroundPlane | None:
+                 cfg: GroundConfig, *, min_b: float = 0.0, n_valid: int | None = None,
+                 rim: torch.Tensor | None = None) -> GroundPlane | None:
     """The plane ``d = a·x + b·y + c`` (``coef`` = (a, b, c)) with band ``tol`` px as a
     :class:`GroundPlane` if it passes the tests of ``cfg.rule`` on the map (see the module
-    docstring; ``min_b``: the position rule's least ``b``), else None.
+    docstring; ``min_b``: the position rule's least ``b``; ``rim``: :func:`view_rim` of ``ok``
+    where the caller has it), else None.
 
     Shape:
-        ``disparity``, ``ok`` (valid, finite pixels) ``(H, W)``.
+        ``disparity``, ``ok`` (valid, finite pixels), ``rim`` ``(H, W)``.
     """
     if n_valid is None:  # a call from outside: check the inputs once
         check_tensor("disparity", disparity, ndim=2, floating=True)
@@ -260,7 +267,7 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     seen = ok & (plane > tol)  # where the plane is in view, and the share of it behind the plane
     hides = int((seen & (d < plane - tol)).sum()) <= cfg.max_below_frac * max(int(seen.sum()), 1)
     position = position and hides
-    rim_frac = rim_share(mask, ok)
+    rim_frac = rim_share(mask, view_rim(ok) if rim is None else rim)
     # a floor seen from above surrounds what it supports: it holds most of the view's rim
     surrounds = hides and rim_frac >= cfg.support_frac
     support = cfg.rule != "position" and (frac >= cfg.support_frac or surrounds)
@@ -269,10 +276,9 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     return GroundPlane(a, b, c, tol, mask, frac, support, rim_frac)
 
 
-def rim_share(mask: torch.Tensor, ok: torch.Tensor) -> float:
-    """The share of the view's rim (:func:`view_rim` of ``ok``) that ``mask`` holds (0 without a
-    rim). Shape: ``mask``, ``ok`` ``(H, W)``."""
-    rim = view_rim(ok)
+def rim_share(mask: torch.Tensor, rim: torch.Tensor) -> float:
+    """The share of the view's rim (``rim``: :func:`view_rim` of the valid pixels) that ``mask``
+    holds (0 without a rim). Shape: ``mask``, ``rim`` ``(H, W)``."""
     return int((mask & rim).sum()) / max(int(rim.sum()), 1)
 
 
