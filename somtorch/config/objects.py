@@ -153,11 +153,12 @@ class AreaConfig(Validated):
 
     Under the ``salient`` rule, image-connected pieces of an area without a solid 3 × 3 block (on
     the refinement grid) are left out of its box as well: specks and sparse speckle bands at the
-    object's disparity stop stretching it; and where a ground plane was cut, an area whose pixels
-    lie in several regions that the cut ground separates is split into them (each holding more than
-    ``1 − box_coverage`` of its pixels): each part is refined, checked and kept on its own, within
-    the budget, and the parts count as one of the ``max_areas`` (one SOM neuron's segment may cover
-    two objects standing apart on the floor). No field for either; the ``paper`` rule does neither.
+    object's disparity stop stretching it; and an area whose pixels lie in several regions that the
+    cut ground or an invalid gap wider than the solidity square separates is split into them (each
+    holding more than ``1 − box_coverage`` of its pixels): each part is refined, checked and kept on
+    its own, within the budget, and the parts count as one of the ``max_areas`` (one SOM neuron's
+    segment may cover two objects standing apart on the floor, or an object and an SGBM streak
+    beyond a band of missing pixels). No field for either; the ``paper`` rule does neither.
     """
 
     _group: ClassVar[str] = "objects"

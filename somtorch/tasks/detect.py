@@ -50,9 +50,9 @@ class MapContext:
             else None (no continuity link on this map).
         continuity: where ``islands`` is set, :func:`~somtorch.tasks.objects.pair_continuity` of
             the map (whether each 4-connected pixel pair is continuous in depth); else None.
-        uncut: where a ground plane was cut (``salient`` rule), the 8-connected regions of the map
-            without the plane's pixels ``(H, W)`` long (invalid pixels join them: only the cut
-            ground separates); else None. An area spread over several is split (:func:`kept_areas`).
+        uncut: the ``salient`` rule's regions of the segmented pixels (:func:`_regions`: the cut
+            ground and invalid gaps wider than the solidity square separate them) ``(H, W)`` long;
+            None under ``paper``. An area spread over several is split (:func:`kept_areas`).
         n_islands: the number of labels of ``islands`` (0 where it is None).
     """
 
@@ -83,7 +83,8 @@ class MapContext:
         islands = continuity = None
         if ground is not None and ground.support and cfg.rule != "paper":
             islands, continuity = _islands(segmented), pair_continuity(disparity)
-        uncut = _islands(segmented | ~valid) if ground is not None and cfg.rule != "paper" else None
+        uncut = None if cfg.rule == "paper" else _regions(segmented, valid,
+                                                          _square(disparity.shape, cfg.solidity_size, 1))
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
                    map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity),
                    islands, continuity, uncut, 0 if islands is None else int(islands.max()) + 1)
@@ -96,6 +97,20 @@ def _islands(segmented: torch.Tensor) -> torch.Tensor:
 
     _, lab = cv2.connectedComponents(segmented.cpu().numpy().astype(np.uint8), connectivity=8)
     return torch.from_numpy(lab.astype(np.int64))
+
+
+def _regions(segmented: torch.Tensor, valid: torch.Tensor, k: int) -> torch.Tensor:
+    """The regions an area may be split into (:attr:`MapContext.uncut`): the 8-connected components
+    of the segmented pixels, where an invalid gap joins what lies on both sides of it if a closing
+    with a ``k × k`` square fills it (a sparse map's holes, an SGBM map's missing pixels inside a
+    surface), and separates them where it is wider (as the cut ground does). ``(H, W)`` long, 0
+    outside the regions."""
+    import cv2
+    import numpy as np
+
+    closed = cv2.morphologyEx(segmented.cpu().numpy().astype(np.uint8), cv2.MORPH_CLOSE,
+                              np.ones((k, k), np.uint8))
+    return _islands(segmented | (~valid & torch.from_numpy(closed.astype(bool))))
 
 
 def linkable_segments(labels: torch.Tensor, stats: NeuronStats, ctx: MapContext, cfg: AreaConfig) -> torch.Tensor:
@@ -176,11 +191,11 @@ def _shift(box: tuple[int, int, int, int], dx: int, dy: int) -> tuple[int, int, 
 
 def _parts(own: torch.Tensor, uncut: torch.Tensor | None, coverage: float, residual: torch.Tensor | None,
            band: float) -> list[torch.Tensor]:
-    """An area's pixels ``own`` split by the cut ground: one mask per island of ``uncut`` (the
-    8-connected regions of the map without the ground plane's pixels) that holds more than ``1 −
-    coverage`` of them and does not lie flat on the ground (most of its pixels within ``band`` px of
-    the plane, ``residual`` = |d − plane|: :func:`refine_box`'s ground clutter), largest first;
-    ``[own]`` where no plane was cut, one island holds all, or every part lies on the ground."""
+    """An area's pixels ``own`` split by the cut ground and wide invalid gaps: one mask per region of
+    ``uncut`` (:func:`_regions`) that holds more than ``1 − coverage`` of them and does not lie flat
+    on the ground (most of its pixels within ``band`` px of the plane, ``residual`` = |d − plane|:
+    :func:`refine_box`'s ground clutter), largest first; ``[own]`` where ``uncut`` is None (the
+    ``paper`` rule), one region holds all, or every part lies on the ground."""
     if uncut is None:
         return [own]
     ids, counts = torch.unique(uncut[own], return_counts=True)
@@ -223,9 +238,9 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     """Select, join, refine and check the candidates in rank order.
 
     Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with
-    segments of an area kept before it) and, where the cut ground separates its pixels, split into
-    parts (``ctx.uncut``; :func:`_parts`), each then treated as a candidate of its own: its box
-    refined (:func:`refine_box`), and kept if its
+    segments of an area kept before it) and, where the cut ground or a wide invalid gap separates
+    its pixels, split into parts (``ctx.uncut``; :func:`_parts`), each then treated as a candidate
+    of its own: its box refined (:func:`refine_box`), and kept if its
     :func:`box_purity` reaches ``cfg.min_purity`` and its segments' solidity reaches
     ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a dense map's standard). After
     the first kept area, a further one must, with ``cfg.keep_budget < 1``, leave the union of the
