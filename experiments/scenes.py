@@ -54,14 +54,15 @@ def _load(spec: Any, data_dir: Path) -> Any:
                              camera=gt.camera, name=spec.name)
 
 
-JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S")
+JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S", "quantize:Q")
 
 
 def check_junk_kind(kind: str) -> None:
     """Raise ``ValueError`` naming the known kinds unless ``kind`` is one of :data:`JUNK_KINDS`
     (``resample:F`` with F a positive number)."""
     for prefix, what, example in (("resample:", "a positive factor", "resample:0.5"),
-                                  ("noise:", "a positive standard deviation in px", "noise:0.5")):
+                                  ("noise:", "a positive standard deviation in px", "noise:0.5"),
+                                  ("quantize:", "a positive step in px", "quantize:1")):
         if kind.startswith(prefix):
             try:
                 ok = float(kind.split(":", 1)[1]) > 0
@@ -98,6 +99,12 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
         noisy = scene.disparity + sigma * noise
         keep = scene.valid & (noisy > 0)  # a disparity pushed to 0 or below is no measurement
         return dataclasses.replace(scene, disparity=torch.where(keep, noisy, scene.disparity), valid=keep,
+                                   name=f"{scene.name}+{kind}")
+    if kind.startswith("quantize:"):  # a sensor that reports whole steps (integer or 8-bit disparity)
+        q = float(kind.split(":", 1)[1])
+        rounded = torch.round(scene.disparity / q) * q
+        keep = scene.valid & (rounded > 0)  # a disparity rounded to 0 is no measurement
+        return dataclasses.replace(scene, disparity=torch.where(keep, rounded, scene.disparity), valid=keep,
                                    name=f"{scene.name}+{kind}")
     if kind == "flip":  # the mirrored scene (a mirrored world is a valid world; the camera is dropped)
         flip = {f: getattr(scene, f).flip(-1) for f in ("disparity", "valid", "image", "objects")

@@ -31,11 +31,14 @@ class GroundConfig(Validated):
         tol_frac: inlier band half-width as a fraction of the map's disparity range (1st–99th
             percentile) …
         tol_px: … but at least this many px …
-        noise_band: … and at least this many times the map's per-pixel disparity noise
+        noise_band: … and at least this many times the map's per-pixel disparity error: its noise
             (:func:`~somtorch.tasks.ground.noise_sigma`: ≤ 0.1 px on every stereo and GT map of the
             corpus, so the band there is the two above; a dense sensor's floor with 0.5 px of noise
-            left a third of its pixels as speckle outside a 0.5 px band); dropped where it exceeds
-            half the map's 1–99 % disparity range (a map of noise, no surface). 0 = off.
+            left a third of its pixels as speckle outside a 0.5 px band) and its rounding (a map
+            stored in steps of q px, :func:`~somtorch.tasks.ground.quantum`, adds q²/12 to the
+            variance: 2/√12 ≈ 0.58 px on an integer map, whose floor is a flight of terraces up to
+            0.5 px off the plane); dropped where it exceeds half the map's 1–99 % disparity range (a
+            map of noise, no surface). 0 = off.
         min_inlier_frac: a plane needs this share of the valid pixels.
         min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
             of the disparity range: a floor spans it, from its horizon to the nearest thing in view;

@@ -102,7 +102,11 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     hi_q = dv.kthvalue(max(1, int(0.99 * m))).values
     span = max(float(hi_q - lo_q), 1e-9)  # robust disparity range (outliers of SGBM maps ignored)
     if cfg.noise_band > 0:
-        noise = cfg.noise_band * (noise_sigma(disparity, ok) if sigma is None else sigma)
+        s = noise_sigma(disparity, ok) if sigma is None else sigma
+        # a map stored in steps of q px (integer, 8-bit) is a flight of flat terraces: its pixels
+        # lie up to q/2 off any plane through them, a uniform error of variance q²/12 that the
+        # neighbour differences (0 on a terrace) do not see
+        noise = cfg.noise_band * math.sqrt(s * s + quantum(dv) ** 2 / 12.0)
     else:
         noise = 0.0
     if noise > 0.5 * span:  # neighbours differ as much as the whole map: noise, no surface to fit
@@ -175,6 +179,21 @@ def noise_sigma(disparity: torch.Tensor, valid: torch.Tensor) -> float:
         return 0.0
     mad = (diff - diff.median()).abs().median()
     return float(1.4826 * mad / math.sqrt(2.0))
+
+
+def quantum(values: torch.Tensor) -> float:
+    """The step in px of the grid a map's disparities ``values`` (1-D: its valid pixels or a sample
+    of them) are stored on: the smallest gap between distinct values, where every distinct value
+    lies on that grid (within 0.1 % of a step) — 1 for an integer map, 1/16 for OpenCV's SGBM, 1/3
+    for a third-size Middlebury 2005/2006 ground truth, a float's resolution for a floating-point
+    map — else 0 (a few flat surfaces at unrelated disparities are no grid; nor are fewer than two
+    distinct values)."""
+    u = torch.unique(values.double())
+    if u.numel() < 2:
+        return 0.0
+    q = float((u[1:] - u[:-1]).min())
+    steps = (u - u[0]) / q
+    return q if bool(((steps - steps.round()).abs() <= 1e-3).all()) else 0.0
 
 
 def _predict(coef: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:

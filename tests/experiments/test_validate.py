@@ -315,6 +315,21 @@ def test_noise_junk_adds_seeded_gaussian_noise_to_every_valid_pixel():
     assert torch.equal(out.objects, scene.objects) and out.name == "toy+noise:0.5"
 
 
+def test_quantize_junk_rounds_every_valid_disparity_to_whole_steps():
+    import torch
+
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()
+    out = add_junk(scene, "quantize:2")
+    d = out.disparity[out.valid]
+    assert torch.equal(d, torch.round(d / 2) * 2) and bool((d > 0).all())
+    assert float((out.disparity - scene.disparity)[out.valid].abs().max()) <= 1.0 + 1e-6
+    assert not bool((out.valid & ~scene.valid).any()) and out.name == "toy+quantize:2"
+    with pytest.raises(ValueError, match="positive step"):
+        add_junk(scene, "quantize:0")
+
+
 def test_the_noisy_floor_frames_are_the_gt_frames_with_noise_in_their_scene_group():
     noisy = [f for f in frames(datasets=["synth_floor_oakd"]) if f.name.endswith("_noisy")]
     assert len(noisy) == 6 and all(f.junk == "noise:0.5" and f.disparity == "gt" for f in noisy)

@@ -152,6 +152,36 @@ def test_the_band_widens_with_the_noise_of_a_dense_floor():
     assert abs(wide.tol - 2 * 0.5) < 0.1  # noise_band × the measured noise
 
 
+def test_quantum_is_the_maps_disparity_resolution():
+    from somtorch.tasks.ground import quantum
+
+    g = torch.Generator().manual_seed(3)
+    d = 5.0 + 40.0 * torch.rand(5000, generator=g, dtype=torch.float64)
+    assert quantum(torch.round(d)) == 1.0  # an integer map
+    assert quantum(torch.round(d * 16) / 16) == 1 / 16  # OpenCV's SGBM
+    assert quantum(d) < 0.05  # floating point
+    assert quantum(torch.full((10,), 7.0)) == 0.0
+
+
+def test_the_band_holds_the_terraces_of_an_integer_floor():
+    """A floor seen from above stored as whole pixels is a flight of flat terraces, each pixel up to
+    0.5 px off the plane: a band of 0.5 px (the noise term ignoring the rounding) leaves about a
+    tenth of the floor as terrace edges; the rounding's variance (q²/12) widens it to 2/√12 px."""
+    ys = torch.arange(240, dtype=torch.float32)[:, None].expand(240, 320)
+    xs = torch.arange(320, dtype=torch.float32)[None, :].expand(240, 320)
+    d = 18.9 + 0.003 * ys + 0.001 * xs
+    box = torch.zeros(240, 320, dtype=torch.bool)
+    box[80:140, 100:180] = True
+    d = torch.round(torch.where(box, d + 8.0, d))
+    valid = torch.ones(240, 320, dtype=torch.bool)
+    rounding_ignored = fit_ground_plane(d, valid, GroundConfig(noise_band=0.0))
+    plane = fit_ground_plane(d, valid)
+    assert rounding_ignored is not None and plane is not None
+    assert float(rounding_ignored.mask[~box].float().mean()) < 0.95
+    assert float(plane.mask[~box].float().mean()) > 0.98 and not bool(plane.mask[box].any())
+    assert abs(plane.tol - 2 / 12 ** 0.5) < 1e-6
+
+
 def test_a_map_of_pure_noise_is_not_cut_by_a_band_as_wide_as_its_noise():
     """Uniform noise over 1-60 px: neighbours differ as much as the whole map (measured noise ~17 px),
     so the noise term is dropped; a 34 px band would have held most pixels and cut them all."""
