@@ -184,10 +184,10 @@ def noise_sigma(disparity: torch.Tensor, valid: torch.Tensor) -> float:
 def quantum(values: torch.Tensor) -> float:
     """The step in px of the grid a map's disparities ``values`` (1-D: its valid pixels or a sample
     of them) are stored on: the smallest gap between distinct values, where every distinct value
-    lies on that grid (within 0.1 % of a step) — 1 for an integer map, 1/16 for OpenCV's SGBM, 1/3
-    for a third-size Middlebury 2005/2006 ground truth, a float's resolution for a floating-point
-    map — else 0 (a few flat surfaces at unrelated disparities are no grid; nor are fewer than two
-    distinct values)."""
+    lies on that grid (within 0.1 % of a step) — 1 for an integer map, 1/16 for OpenCV's SGBM, up
+    to 1/3 for a third-size Middlebury 2005/2006 ground truth, a float's resolution for a
+    floating-point map — else 0 (a few flat surfaces at unrelated disparities are no grid, nor are
+    values a float32 rounding puts one unit apart; nor are fewer than two distinct values)."""
     u = torch.unique(values.double())
     if u.numel() < 2:
         return 0.0
