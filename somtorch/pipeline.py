@@ -240,8 +240,7 @@ def on_support(scene: Scene, ground: GroundPlane | None,
         return scene, ground
     h, w = scene.disparity.shape
     height = relative_disparity(scene.disparity, ground.disparity(h, w))
-    level = GroundPlane(0.0, 0.0, 0.0, ground.tol, ground.mask, ground.inlier_frac, ground.support,
-                        ground.rim_frac)
+    level = replace(ground, a=0.0, b=0.0, c=0.0)  # its own disparity cache (a field outside init)
     return replace(scene, disparity=height), level
 
 
@@ -357,9 +356,8 @@ def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg
     s = cfg.map_stride
     if s == 1:
         return scene.disparity, scene.valid, labels, ground, cfg
-    g = None if ground is None else GroundPlane(ground.a * s, ground.b * s, ground.c, ground.tol,
-                                                ground.mask[::s, ::s].contiguous(), ground.inlier_frac,
-                                                ground.support, ground.rim_frac)
+    g = None if ground is None else replace(ground, a=ground.a * s, b=ground.b * s,
+                                            mask=ground.mask[::s, ::s].contiguous())
     return (scene.disparity[::s, ::s].contiguous(), scene.valid[::s, ::s].contiguous(),
             labels[:, ::s, ::s].contiguous(), g, cfg)
 

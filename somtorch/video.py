@@ -23,7 +23,7 @@ experiment (a synthetic camera motion over a real scene when no sequence is give
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import torch
 
@@ -97,8 +97,7 @@ class SequenceRunner:
             share = float(mask.sum()) / max(int(valid.sum()), 1)
             if share >= self.ground_keep * g.inlier_frac:
                 self._ground_age += 1
-                rim_frac = rim_share(mask, view_rim(valid))
-                plane = GroundPlane(g.a, g.b, g.c, g.tol, mask, share, g.support, rim_frac)
+                plane = replace(g, mask=mask, inlier_frac=share, rim_frac=rim_share(mask, view_rim(valid)))
                 plane._cache = g._cache  # the same plane: its disparity map is not recomputed
                 return plane, True
         g = fit_ground_plane(scene.disparity, valid, cfg, sigma=sigma)
