@@ -209,6 +209,8 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     m0 = metrics["members"][cfg.output.member]
     log.info("member %d: %d areas, kept %d, reduction %.1f %% (union), %.1f %% (crops)", cfg.output.member,
              m0["n_areas"], len(m0["kept_areas"]), m0["reduction_union"], m0["reduction_crops"])
+    if metrics.get("object_step"):
+        log.info("object step: %s — %s", metrics["object_step"]["mode"], metrics["object_step"]["reason"])
     if s:
         log.info("object: identified_100 %d/%d, identified_95 %d/%d, useful hits %d, x_opt %.1f %%",
                  s["identified_100"], s["runs"], s["identified_95"], s["runs"], s["useful_hits"], s["x_opt"])

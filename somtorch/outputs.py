@@ -22,6 +22,7 @@ from .config import OutputConfig  # noqa: F401  (re-exported: the output group's
 from .evaluation import summary_stats
 from .disparity.scene import Scene
 from .pipeline import PipelineResult
+from .tasks.detect import object_mode
 from .tasks.segmentation import color_map, grey_map
 
 log = logging.getLogger(__name__)
@@ -65,6 +66,7 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
         "pixels": {"train": len(result.train_features), "segmented": len(result.features),
                    **train_strides(scene, result)},
         "timings_s": dict(result.timings),
+        "object_step": object_step(result),
         "members": members,
     }
     scores = [m.score for m in result.members if m.score is not None]
@@ -85,6 +87,16 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
     if config is not None:
         out["config"] = config
     return out
+
+
+def object_step(result: PipelineResult) -> dict[str, str] | None:
+    """How step 1c linked and ranked the areas, and why (:func:`~somtorch.tasks.detect.object_mode`):
+    ``{"mode": "support" | "contrast" | "paper", "reason": ...}``; ``"contrast"`` is the fallback of
+    the default rule where no support plane was verified. None for a run without a SOM config."""
+    if result.config is None:
+        return None
+    mode, why = object_mode(result.ground, result.config.objects)
+    return {"mode": mode, "reason": why}
 
 
 def train_strides(scene: Scene, result: PipelineResult) -> dict[str, Any]:

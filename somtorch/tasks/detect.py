@@ -27,7 +27,8 @@ from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_are
 from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, _square, box_purity, map_solidity, merge_adjacent, refine_box
 
-__all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "linkable_segments", "rank_score"]
+__all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "linkable_segments", "object_mode",
+           "rank_score"]
 
 
 @dataclass
@@ -81,13 +82,30 @@ class MapContext:
             band = cfg.ground_clutter * ground.tol
         lab = torch.where(segmented, 0, -1)
         islands = continuity = None
-        if ground is not None and ground.support and cfg.rule != "paper":
+        if object_mode(ground, cfg)[0] == "support":
             islands, continuity = _islands(segmented), pair_continuity(disparity)
         uncut = None if cfg.rule == "paper" else _regions(segmented, valid,
                                                           _square(disparity.shape, cfg.solidity_size, 1))
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
                    map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity),
                    islands, continuity, uncut, 0 if islands is None else int(islands.max()) + 1)
+
+
+def object_mode(ground: GroundPlane | None, cfg: AreaConfig) -> tuple[str, str]:
+    """How step 1c links and ranks on a map, and why: ``("support", why)`` where the support test
+    verified the cut plane (segments link by similarity and by depth continuity; areas ranked by
+    size × nearness), ``("contrast", why)`` elsewhere under the ``salient`` rule — the fallback:
+    similarity links, ranked by contrast × size — and ``("paper", why)`` under the paper's rule.
+    ``why`` is one sentence for ``metrics.json`` (:func:`somtorch.outputs.summarize`)."""
+    if cfg.rule == "paper":
+        return "paper", "objects.rule=paper: grid-adjacent similar neurons, the nearest area"
+    if ground is None:
+        return "contrast", "no ground plane was cut (none found, or ground.rule=none)"
+    rim = "" if ground.rim_frac is None else f", {ground.rim_frac:.0%} of the view's rim"
+    held = f"it holds {ground.inlier_frac:.0%} of the valid pixels{rim}"
+    if ground.support:
+        return "support", f"the cut ground plane was verified as a support ({held})"
+    return "contrast", f"the cut ground plane was verified by its position only, not as a support ({held})"
 
 
 def _islands(segmented: torch.Tensor) -> torch.Tensor:

@@ -323,6 +323,8 @@ def test_a_file_input_names_its_folder_and_scene(tmp_path):
     assert m["scene"]["name"] == "my_scan_07"
     assert m["scene"]["invalid_pixels"] == 0 and "removed_pixels" not in m["scene"]
     assert all(isinstance(x["kept_everything"], bool) for x in m["members"])
+    assert m["object_step"]["mode"] in ("support", "contrast") and m["object_step"]["reason"]
+    assert ("ground_plane" in m) == ("no ground plane" not in m["object_step"]["reason"])
 
 
 def test_quiet_prints_only_where_the_results_are_and_keeps_the_log(tmp_path):

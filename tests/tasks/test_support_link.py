@@ -157,3 +157,24 @@ def test_a_boundary_is_continuous_when_most_of_its_pixel_pairs_are():
         assert (share >= CONTINUOUS_SHARE) == linked
         result, _ = _run(labels, disp, AreaConfig())
         assert (frozenset({0, 1}) in _groups(result)) == linked, share
+
+
+def test_object_mode_names_the_link_and_ranking_used_and_why():
+    from somtorch.tasks.detect import object_mode
+
+    mask = torch.zeros(H, W, dtype=torch.bool)
+    supported = GroundPlane(0.0, 0.1, 1.0, 0.5, mask, 0.44, support=True, rim_frac=0.77)
+    positioned = dataclasses.replace(supported, support=False, inlier_frac=0.32, rim_frac=0.53)
+    mode, why = object_mode(supported, AreaConfig())
+    assert mode == "support" and "44%" in why and "77%" in why
+    mode, why = object_mode(positioned, AreaConfig())
+    assert mode == "contrast" and "position only" in why and "32%" in why
+    assert object_mode(None, AreaConfig())[0] == "contrast"
+    assert object_mode(supported, AreaConfig(rule="paper"))[0] == "paper"
+    # the context's continuity link follows the same verdict
+    disp = torch.full((H, W), 10.0)
+    valid = torch.ones(H, W, dtype=torch.bool)
+    ctx = MapContext.build(disp, valid, valid, supported, AreaConfig())
+    assert ctx.islands is not None and ctx.continuity is not None
+    ctx = MapContext.build(disp, valid, valid, positioned, AreaConfig())
+    assert ctx.islands is None and ctx.continuity is None
