@@ -54,7 +54,7 @@ def _load(spec: Any, data_dir: Path) -> Any:
                              camera=gt.camera, name=spec.name)
 
 
-JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S", "quantize:Q")
+JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S", "quantize:Q", "scale:F")
 
 
 def check_junk_kind(kind: str) -> None:
@@ -62,7 +62,8 @@ def check_junk_kind(kind: str) -> None:
     (``resample:F`` with F a positive number)."""
     for prefix, what, example in (("resample:", "a positive factor", "resample:0.5"),
                                   ("noise:", "a positive standard deviation in px", "noise:0.5"),
-                                  ("quantize:", "a positive step in px", "quantize:1")):
+                                  ("quantize:", "a positive step in px", "quantize:1"),
+                                  ("scale:", "a positive factor", "scale:0.5")):
         if kind.startswith(prefix):
             try:
                 ok = float(kind.split(":", 1)[1]) > 0
@@ -99,6 +100,10 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
         noisy = scene.disparity + sigma * noise
         keep = scene.valid & (noisy > 0)  # a disparity pushed to 0 or below is no measurement
         return dataclasses.replace(scene, disparity=torch.where(keep, noisy, scene.disparity), valid=keep,
+                                   name=f"{scene.name}+{kind}")
+    if kind.startswith("scale:"):  # another rig: f·B (focal length × baseline) multiplies every disparity
+        f = float(kind.split(":", 1)[1])
+        return dataclasses.replace(scene, disparity=torch.where(scene.valid, scene.disparity * f, scene.disparity),
                                    name=f"{scene.name}+{kind}")
     if kind.startswith("quantize:"):  # a sensor that reports whole steps (integer or 8-bit disparity)
         q = float(kind.split(":", 1)[1])

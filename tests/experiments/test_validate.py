@@ -330,6 +330,20 @@ def test_quantize_junk_rounds_every_valid_disparity_to_whole_steps():
         add_junk(scene, "quantize:0")
 
 
+def test_scale_junk_multiplies_every_valid_disparity_as_another_rig_would():
+    import torch
+
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()
+    out = add_junk(scene, "scale:0.25")
+    assert torch.allclose(out.disparity[out.valid], 0.25 * scene.disparity[scene.valid])
+    assert torch.equal(out.valid, scene.valid) and torch.equal(out.objects, scene.objects)
+    assert torch.equal(out.disparity[~out.valid], scene.disparity[~scene.valid]) and out.name == "toy+scale:0.25"
+    with pytest.raises(ValueError, match="positive factor"):
+        add_junk(scene, "scale:-2")
+
+
 def test_the_noisy_floor_frames_are_the_gt_frames_with_noise_in_their_scene_group():
     noisy = [f for f in frames(datasets=["synth_floor_oakd"]) if f.name.endswith("_noisy")]
     assert len(noisy) == 6 and all(f.junk == "noise:0.5" and f.disparity == "gt" for f in noisy)
