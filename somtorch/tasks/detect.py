@@ -100,7 +100,8 @@ def object_mode(ground: GroundPlane | None, cfg: AreaConfig) -> tuple[str, str]:
     if cfg.rule == "paper":
         return "paper", "objects.rule=paper: grid-adjacent similar neurons, the nearest area"
     if ground is None:
-        return "contrast", "no ground plane was cut (none found, or ground.rule=none)"
+        return "contrast", ("no ground plane was cut (none passed the tests, ground.rule=none, or the plane "
+                            "held every pixel)")
     rim = "" if ground.rim_frac is None else f", {ground.rim_frac:.0%} of the view's rim"
     held = f"it holds {ground.inlier_frac:.0%} of the valid pixels{rim}"
     if ground.support:
