@@ -470,3 +470,39 @@ def test_the_thread_count_never_changes_a_result(motorcycle, monkeypatch):
         torch.set_num_threads(before)
     assert torch.equal(out[1][0], out[2][0]) and torch.equal(out[1][1], out[2][1])
     assert out[1][2:] == out[2][2:]
+
+
+def _bad_maps() -> dict:
+    """The issue's bad-input classes for step 1c, each as (disparity, valid) of 60 × 80."""
+    g = torch.Generator().manual_seed(7)
+    ys, xs = torch.meshgrid(torch.arange(60.0), torch.arange(80.0), indexing="ij")
+    ones = torch.ones(60, 80, dtype=torch.bool)
+    no_plane = 20.0 + 8.0 * torch.sin(xs / 7.0) * torch.cos(ys / 5.0)  # a bumpy surface, no plane in it
+    one_piece = 10.0 + 0.3 * xs + 0.1 * ys  # one smooth ramp: one component covering everything
+    streaky = torch.full((60, 80), 12.0)
+    streaky[30:50, 25:45] = 20.0  # a box in front of a wall …
+    rows = torch.randint(0, 60, (25,), generator=g)
+    for r in rows.tolist():  # … and SGBM-like horizontal mismatch streaks with gaps
+        x0 = int(torch.randint(0, 60, (1,), generator=g))
+        streaky[r, x0:x0 + 20] = float(torch.randint(5, 30, (1,), generator=g))
+    gaps = torch.rand(60, 80, generator=g) > 0.15
+    bowl = 120.0 + 60.0 * torch.exp(-((xs - 40) ** 2 + (ys - 30) ** 2) / 300.0)  # smooth 8-bit "depth"
+    eight_bit = torch.round(bowl.clamp(0, 255))
+    return {"no plane": (no_plane, ones), "one component": (one_piece, ones),
+            "streaky SGBM": (streaky, gaps), "smooth 8-bit": (eight_bit, ones)}
+
+
+@pytest.mark.parametrize("kind", ["no plane", "one component", "streaky SGBM", "smooth 8-bit"])
+def test_bad_maps_for_step_1c_run_and_say_which_rule_was_applied(kind):
+    from somtorch.disparity.scene import scene_from_arrays
+    from somtorch.outputs import summarize
+
+    d, valid = _bad_maps()[kind]
+    scene = scene_from_arrays(d, valid, name=kind.replace(" ", "_"))
+    res = run_pipeline(scene, PipelineConfig(ensemble=2), metrics=False)
+    assert all(m.kept for m in res.members)  # something is always kept (the whole map at worst)
+    step = summarize(scene, res)["object_step"]
+    assert step["mode"] in ("support", "contrast") and step["reason"]
+    assert (step["mode"] == "support") == (res.ground is not None and res.ground.support)
+    if res.ground is None:
+        assert "no ground plane" in step["reason"]
