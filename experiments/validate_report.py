@@ -43,6 +43,12 @@ def summarize(t: Any, rows: list[dict[str, Any]]) -> dict[str, Any]:
             **({k: float(np.mean([s[k] for s in sal])) for k in sal[0]} if sal else {})}
     for label, real_only in (("real", True), ("all", False)):
         out[f"macro_{label}"] = {f"{part}_{m}": t.macro(v, real_only)[0] for (part, m), v in arr.items()}
+    if all("best_area_hits" in r["default"] for r in rows):  # the selection ceiling (defaults only)
+        best = np.array([r["default"]["best_area_hits"] / r["default"]["runs"] for r in rows])
+        for d, v in t.per_dataset(best).items():
+            out["datasets"][d]["default_best_area_hits"] = v
+        for label, real_only in (("real", True), ("all", False)):
+            out[f"macro_{label}"]["default_best_area_hits"] = t.macro(best, real_only)[0]
     return out
 
 
@@ -74,6 +80,15 @@ def to_markdown(report: dict[str, Any]) -> str:
         out.append(f"| **macro, {label}** | | | | | | | {_pct(m['default_useful_hits'])} | {_pct(m['in_sample_useful_hits'])} | "
                    f"**{_pct(m['left_out_useful_hits'])}** | {_pct(m['default_all_objects_hits'])} | "
                    f"{_pct(m['in_sample_all_objects_hits'])} | **{_pct(m['left_out_all_objects_hits'])}** | | | |")
+    if "default_best_area_hits" in sm["macro_real"]:
+        out += ["", "Selection ceiling (defaults): % of runs with a useful hit, and % whose kept areas or "
+                "any area of the grouping hold one box that alone (with the tolerance) would be a useful "
+                "hit — what a perfect choice among the step's candidates could reach:", "",
+                "| dataset | default useful | best single area |", "|---|---|---|"]
+        out += [f"| {d} | {_pct(r['default_useful_hits'])} | {_pct(r['default_best_area_hits'])} |"
+                for d, r in sm["datasets"].items()]
+        out += [f"| **macro, {label}** | {_pct(sm[f'macro_{label}']['default_useful_hits'])} | "
+                f"{_pct(sm[f'macro_{label}']['default_best_area_hits'])} |" for label in ("real", "all")]
     choice = report["in_sample_choice"]
     out += ["", f"In-sample choice: {', '.join(f'{k}={v}' for k, v in choice.items()) or 'the defaults'}.", "",
             "Left-out choices (each made without the dataset):", ""]

@@ -21,11 +21,11 @@ import torch
 
 from .disparity.scene import Scene
 from .tasks.ground import GroundPlane
-from .tasks.reduction import Reduction, reduce_map
+from .tasks.reduction import Reduction, expand_box, reduce_map, valid_integral
 from .tasks.scoring import object_box, score_reduction
 
 __all__ = ["AllObjects", "all_objects", "ground_object_share", "merge_runs", "per_object_scores", "run_records",
-           "segment_f1", "summarize_runs", "summary_stats"]
+           "segment_f1", "selection_ceiling", "summarize_runs", "summary_stats"]
 
 
 def summary_stats(values: list[float]) -> dict[str, float | int | None]:
@@ -75,6 +75,42 @@ def ground_object_share(ground: GroundPlane | None, scene: Scene) -> float:
     obj = (scene.objects > 0) & scene.valid
     n = int(obj.sum())
     return int((obj & ground.mask).sum()) / n if n else 0.0
+
+
+def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *,
+                      tolerance_px: float, tolerance_frac: float, tolerance_image: float,
+                      useful_factor: float = 0.75) -> int:
+    """How many of ``members`` (pipeline :class:`~somtorch.pipeline.MemberResult`) had, among their
+    kept areas and every area the grouping produced, one whose box alone — with the reduction's
+    tolerance — is a useful hit: the ceiling of a perfect choice among the step's candidates
+    (a run counted here may still miss: the step kept another area, or more than one).
+
+    Each box is scored in O(1) from integral images (the same counts as :func:`~somtorch.tasks.
+    reduction.reduce_map` and :func:`~somtorch.tasks.scoring.score_reduction` of that box alone).
+
+    Shape:
+        ``object_mask``, ``valid`` ``(H, W)`` bool.
+    """
+    obj = object_mask & valid
+    n_obj, n_valid = int(obj.sum()), int(valid.sum())
+    if n_obj == 0 or n_valid == 0:
+        return 0
+    iv, io = valid_integral(valid), valid_integral(obj)
+    shape = tuple(valid.shape)
+
+    def inside(ii: torch.Tensor, b: tuple[int, int, int, int]) -> int:
+        x0, y0, x1, y1 = b
+        return int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0])
+
+    def useful(box: tuple[int, int, int, int]) -> bool:
+        if box[2] < box[0] or box[3] < box[1]:
+            return False
+        b = expand_box(box, shape, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac,
+                       tolerance_image=tolerance_image)
+        reduction = 100.0 * (1.0 - inside(iv, b) / n_valid)
+        return inside(io, b) / n_obj >= 0.95 and reduction >= useful_factor * x_opt
+
+    return sum(any(useful(a.box) for a in list(m.kept) + list(m.areas)) for m in members)
 
 
 def segment_f1(labels, obj) -> tuple[float, float, float]:

@@ -235,6 +235,7 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
         assert r["left_out"]["useful_hits"] == rep["candidates"][r["frame"]][key]["useful_hits"]
         d = r["default"]
         assert d["useful_hits"] + sum(d["misses"].values()) == d["runs"], d
+        assert 0 <= d["best_area_hits"] <= d["runs"]  # the selection ceiling, the defaults only
     kn = rep["knobs"]["objects.merge"]
     assert kn["verdict"] in ("keep", "remove") or kn["verdict"].startswith("adopt")
     assert [e["value"] for e in kn["values"]] == [0.0, 0.5] and kn["values"][0]["neutral"]
@@ -242,6 +243,7 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     md = (tmp_path / "validate.md").read_text()
     assert "| **macro, real** |" in md and "| objects.merge | 0.75 | 0.0 (neutral) |" in md
     assert list(rep["robustness"]) == ["flip"] and "| flip |" in md
+    assert "Selection ceiling" in md and 0 <= sm["macro_real"]["default_best_area_hits"] <= 1
     assert sorted(p.name for p in (tmp_path / "gallery").glob("*.png")) == sorted(f"{r['frame']}.png" for r in rep["rows"])
     # the task baselines (default: plane_components, uv_disparity), one run per frame, beside the defaults
     for r in rep["rows"]:
