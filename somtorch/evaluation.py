@@ -85,8 +85,9 @@ def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Ten
     tolerance — is a useful hit: the ceiling of a perfect choice among the step's candidates
     (a run counted here may still miss: the step kept another area, or more than one).
 
-    Each box is scored in O(1) from integral images (the same counts as :func:`~somtorch.tasks.
-    reduction.reduce_map` and :func:`~somtorch.tasks.scoring.score_reduction` of that box alone).
+    Each box is scored in O(1) from integral images: the same counts as
+    :func:`~somtorch.tasks.reduction.reduce_map` and :func:`~somtorch.tasks.scoring.score_reduction`
+    of that box alone.
 
     Shape:
         ``object_mask``, ``valid`` ``(H, W)`` bool.
