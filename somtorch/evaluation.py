@@ -22,7 +22,7 @@ import torch
 from .disparity.scene import Scene
 from .tasks.ground import GroundPlane
 from .tasks.reduction import Reduction, expand_box, reduce_map, valid_integral
-from .tasks.scoring import object_box, score_reduction
+from .tasks.scoring import IDENTIFIED, USEFUL_FACTOR, object_box, score_reduction
 
 __all__ = ["AllObjects", "all_objects", "ground_object_share", "merge_runs", "per_object_scores", "run_records",
            "segment_f1", "selection_ceiling", "summarize_runs", "summary_stats"]
@@ -46,7 +46,8 @@ class AllObjects:
     valid: torch.Tensor
     x_opt: float  # reduction in % when exactly the union of the objects' boxes is kept
 
-    def hit(self, reduction: Reduction, *, useful_factor: float = 0.75, min_fraction: float = 0.95) -> bool:
+    def hit(self, reduction: Reduction, *, useful_factor: float = USEFUL_FACTOR,
+            min_fraction: float = IDENTIFIED) -> bool:
         """Every object ≥ ``min_fraction`` inside the kept union and reduction ≥ factor × x_opt."""
         for m in self.masks:
             obj = m & self.valid
@@ -79,7 +80,7 @@ def ground_object_share(ground: GroundPlane | None, scene: Scene) -> float:
 
 def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *,
                       tolerance_px: float, tolerance_frac: float, tolerance_image: float,
-                      useful_factor: float = 0.75) -> int:
+                      useful_factor: float = USEFUL_FACTOR) -> int:
     """How many of ``members`` (pipeline :class:`~somtorch.pipeline.MemberResult`) had, among their
     kept areas and every area the grouping produced, one whose box alone — with the reduction's
     tolerance — is a useful hit: the ceiling of a perfect choice among the step's candidates
@@ -109,7 +110,7 @@ def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Ten
         b = expand_box(box, shape, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac,
                        tolerance_image=tolerance_image)
         reduction = 100.0 * (1.0 - inside(iv, b) / n_valid)
-        return inside(io, b) / n_obj >= 0.95 and reduction >= useful_factor * x_opt
+        return inside(io, b) / n_obj >= IDENTIFIED and reduction >= useful_factor * x_opt
 
     return sum(any(useful(a.box) for a in list(m.kept) + list(m.areas)) for m in members)
 

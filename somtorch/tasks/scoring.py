@@ -16,6 +16,11 @@ import torch
 from ..validation import check_tensor
 from .reduction import Reduction, reduce_map
 
+#: The paper's useful hit: at least this share of the object identified …
+IDENTIFIED = 0.95
+#: … at a reduction of at least this factor × x_opt.
+USEFUL_FACTOR = 0.75
+
 
 @dataclass
 class Score:
@@ -60,7 +65,7 @@ def optimal_reduction(object_mask: torch.Tensor, valid: torch.Tensor, integral: 
 
 
 def score_reduction(reduction: Reduction, object_mask: torch.Tensor, valid: torch.Tensor,
-                    *, useful_factor: float = 0.75, x_opt: float | None = None) -> Score:
+                    *, useful_factor: float = USEFUL_FACTOR, x_opt: float | None = None) -> Score:
     """Score one reduced map against an object mask ``(H, W)`` bool.
 
     ``x_opt``: :func:`optimal_reduction` of the same mask and valid pixels if already known (it does
@@ -78,5 +83,5 @@ def score_reduction(reduction: Reduction, object_mask: torch.Tensor, valid: torc
     if x_opt is None:
         x_opt = optimal_reduction(object_mask, valid)
     red = reduction.reduction_union
-    return Score(frac, frac >= 1.0, frac >= 0.95, red, reduction.reduction_crops, x_opt,
-                 frac >= 0.95 and red >= useful_factor * x_opt)
+    return Score(frac, frac >= 1.0, frac >= IDENTIFIED, red, reduction.reduction_crops, x_opt,
+                 frac >= IDENTIFIED and red >= useful_factor * x_opt)
