@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
@@ -64,6 +65,7 @@ class _State:
     defer: int = 0
     installed: bool = False
     left: frozenset[int] = frozenset()  # signals this process leaves to its parent (leave_to_parent)
+    hook: Callable[[Any], None] | None = None  # the sys.unraisablehook install() put in place
 
 
 _state = _State()
@@ -76,14 +78,31 @@ def _handler(signum: int, frame: object) -> None:
         raise Interrupted(signum, _state.where)
 
 
+def _unraisable(hook: Callable[[Any], None]) -> Callable[[Any], None]:
+    """A ``sys.unraisablehook`` that says nothing of an :class:`Interrupted` raised where Python
+    cannot pass an exception on — a weakref callback (the import system's module locks), a
+    ``__del__`` — and hands everything else to ``hook``, the hook it replaces. Python would print
+    "Exception ignored in …" and a traceback; the signal's flag is set by then, so the next
+    :func:`checkpoint` (or a second signal) raises it where it stops the run, with its one line."""
+    def unraisable(info: Any) -> None:
+        if not isinstance(info.exc_value, Interrupted):
+            hook(info)
+    return unraisable
+
+
 def install(signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> bool:
     """Route ``signals`` through the flag (see the module docstring); False (and nothing done)
-    outside the main thread, where Python cannot install handlers."""
+    outside the main thread, where Python cannot install handlers. An :class:`Interrupted` that
+    lands where Python only reports exceptions (a weakref callback during an import) is not
+    printed: the pending flag stops the run at the next checkpoint."""
     if threading.current_thread() is not threading.main_thread():
         return False
     for s in signals:
         if s not in _state.left:
             signal.signal(s, _handler)
+    if sys.unraisablehook is not _state.hook:  # once per hook in place (pytest swaps its own in and out)
+        _state.hook = _unraisable(sys.unraisablehook)
+        sys.unraisablehook = _state.hook
     _state.installed = True
     return True
 
