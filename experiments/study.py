@@ -143,7 +143,7 @@ def _execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[st
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
     obj_mask = None
     if scene.objects is not None:
-        obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
+        obj_mask = scene.scored_mask(cfg.object_id)
     if cfg.task_baseline is not None:  # one deterministic run, no training
         from somtorch.atomic import write_staged
 

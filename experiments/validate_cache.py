@@ -98,10 +98,9 @@ class SceneCache:
         if not overrides:  # the defaults: how far a perfect choice among the step's areas would go
             from somtorch.evaluation import selection_ceiling
 
-            r, oid = self.base.reduction, self.base.object_id
-            obj = self.scene.main_object_mask if oid is None else self.scene.object_mask(oid)
+            r = self.base.reduction
             self.scores[key]["best_area_hits"] = selection_ceiling(
-                members, obj, self.scene.valid, s[0].x_opt, tolerance_px=r.tolerance_px,
+                members, self.scene.scored_mask(self.base.object_id), self.scene.valid, s[0].x_opt, tolerance_px=r.tolerance_px,
                 tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image)
         if saliency:
             from somtorch.saliency_metrics import saliency_scores

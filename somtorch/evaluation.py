@@ -21,7 +21,7 @@ import torch
 
 from .disparity.scene import Scene
 from .tasks.ground import GroundPlane
-from .tasks.reduction import Reduction, expand_box, reduce_map, valid_integral
+from .tasks.reduction import Reduction, box_count, expand_box, reduce_map, valid_integral
 from .tasks.scoring import IDENTIFIED, USEFUL_FACTOR, object_box, score_reduction
 
 __all__ = ["AllObjects", "all_objects", "ground_object_share", "merge_runs", "per_object_scores", "run_records",
@@ -100,17 +100,13 @@ def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Ten
     iv, io = valid_integral(valid), valid_integral(obj)
     shape = tuple(valid.shape)
 
-    def inside(ii: torch.Tensor, b: tuple[int, int, int, int]) -> int:
-        x0, y0, x1, y1 = b
-        return int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0])
-
     def useful(box: tuple[int, int, int, int]) -> bool:
         if box[2] < box[0] or box[3] < box[1]:
             return False
         b = expand_box(box, shape, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac,
                        tolerance_image=tolerance_image)
-        reduction = 100.0 * (1.0 - inside(iv, b) / n_valid)
-        return inside(io, b) / n_obj >= IDENTIFIED and reduction >= useful_factor * x_opt
+        reduction = 100.0 * (1.0 - box_count(iv, b) / n_valid)
+        return box_count(io, b) / n_obj >= IDENTIFIED and reduction >= useful_factor * x_opt
 
     return sum(any(useful(a.box) for a in list(m.kept) + list(m.areas)) for m in members)
 

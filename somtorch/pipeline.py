@@ -259,7 +259,7 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
         integral = ctx.integral if st == 1 else valid_integral(scene.valid)  # the reduction's: full size
     obj_mask, x_opt = None, None
     if scene.objects is not None:
-        obj_mask = scene.object_mask(cfg.object_id) if cfg.object_id is not None else scene.main_object_mask
+        obj_mask = scene.scored_mask(cfg.object_id)
         x_opt = optimal_reduction(obj_mask, scene.valid, integral)  # the same for every member
     r = cfg.reduction
     members = []

@@ -121,6 +121,11 @@ class Scene:
             return None
         return torch.isin(self.objects, torch.tensor(main, dtype=torch.int64))
 
+    def scored_mask(self, object_id: int | None = None) -> torch.Tensor | None:
+        """The mask a run is scored against: object ``object_id``'s (:meth:`object_mask`), or the
+        main objects' (:attr:`main_object_mask`) where it is None."""
+        return self.main_object_mask if object_id is None else self.object_mask(object_id)
+
     def __repr__(self) -> str:
         parts = [f"{self.height}x{self.width}", f"valid {self.n_valid / self.valid.numel():.1%}",
                  "image" if self.image is not None else "no image", f"{len(self.object_info)} object(s)",

@@ -79,6 +79,14 @@ def valid_integral(valid: torch.Tensor) -> torch.Tensor:
     return ii
 
 
+def box_count(integral: torch.Tensor, box: Box) -> int:
+    """The count of the mask whose :func:`valid_integral` is ``integral`` inside ``box`` (x0, y0, x1,
+    y1, inclusive, inside the image), in O(1)."""
+    x0, y0, x1, y1 = box
+    ii = integral
+    return int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0])
+
+
 def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = _R.tolerance_px,
                tolerance_frac: float = _R.tolerance_frac, tolerance_image: float = _R.tolerance_image,
                integral: torch.Tensor | None = None) -> Reduction:
@@ -118,7 +126,7 @@ def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = _
         x0, y0, x1, y1 = expand_box(b, shape, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac,
                                     tolerance_image=tolerance_image)
         kept_boxes.append((x0, y0, x1, y1))
-        crops.append(int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0]))
+        crops.append(box_count(ii, (x0, y0, x1, y1)))
         mask[y0:y1 + 1, x0:x1 + 1] = True
     total = int(ii[-1, -1])
     return Reduction(kept_boxes, mask, int((mask & valid).sum()), sum(crops), total, crops)

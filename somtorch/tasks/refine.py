@@ -21,6 +21,7 @@ import torch
 
 from ..config import AreaConfig
 from .objects import NeuronStats, ObjectArea, label_mask
+from .reduction import box_count
 
 _D = AreaConfig  # the defaults of the helpers below are those of the config
 
@@ -161,8 +162,7 @@ def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Ten
         ``(H+1, W+1)``: the integral image of the valid mask.
     """
     x0, y0, x1, y1 = area.box
-    ii = valid_integral
-    n_valid = int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0])
+    n_valid = box_count(valid_integral, area.box)
     if mask is None:
         own = int(label_mask(labels[y0:y1 + 1, x0:x1 + 1], area.neurons).sum())
     else:
