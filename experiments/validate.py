@@ -217,7 +217,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     if cfg.gallery is not None:
         for c in caches:
             gallery(c, Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
-    robustness = {t: transformed(caches, t) for t in cfg.transforms}
+    robustness = {t: transformed(caches, t, cfg.baselines, cfg.reduction) for t in cfg.transforms}
     return {"grid": grid, "defaults": defaults, "neutral": dict(cfg.neutral), "in_sample_choice": in_sample,
             "in_sample_steps": in_sample_steps, "folds": folds, "rows": rows, "summary": summary, "knobs": knobs,
             "rule": {"n_boot": cfg.n_boot, "loss_margin": cfg.loss_margin, "ni_margin": cfg.ni_margin,
@@ -256,21 +256,28 @@ def _progress(total: int) -> Any:
     return progress_bar(total, "frames", "frame")
 
 
-def transformed(caches: list[SceneCache], kind: str) -> dict[str, dict[str, Any]]:
+def transformed(caches: list[SceneCache], kind: str, baselines: list[str] = (),
+                reduction: Any = None) -> dict[str, dict[str, Any]]:
     """The default scores of every scene of ``caches`` transformed by ``add_junk(scene, kind)``,
-    by scene name. A transform is a check of the rule (a mirrored or resampled scene is as easy
+    by scene name, each with ``"baselines"``: the task baselines of ``baselines`` run once on the
+    same transformed scene (:func:`~experiments.validate_baselines.baseline_counts`; ``reduction``:
+    the reduction config they are scored with), so that a probe reads the pipeline and its peers
+    side by side. A transform is a check of the rule (a mirrored or resampled scene is as easy
     as the original; a pole in front of the object is a failure class), not a tuning scene: the
     folds never see it. Scenes already resampled are skipped by a resampling transform."""
     from .scenes import add_junk
+    from .validate_baselines import baseline_counts
 
     out = {}
     for c in caches:
         if kind.startswith("resample:") and (c.spec.junk or "").startswith("resample:"):
             continue
         t0 = time.perf_counter()
-        tc = SceneCache(c.spec, add_junk(c.scene, kind, seed=sum(map(ord, c.spec.name))), c.base)
-        out[c.spec.name] = tc.score({})
-        sc = out[c.spec.name]
+        scene = add_junk(c.scene, kind, seed=sum(map(ord, c.spec.name)))
+        tc = SceneCache(c.spec, scene, c.base)
+        out[c.spec.name] = sc = tc.score({})
+        sc["baselines"] = (baseline_counts(scene, list(baselines), reduction, c.spec.camera)
+                           if baselines else {})
         log.info("%s (%s): default %d useful of %d (%.1f s)", c.spec.name, kind, sc["useful_hits"],
                  sc["runs"], time.perf_counter() - t0)
     return out

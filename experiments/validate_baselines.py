@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["baselines_markdown", "check_trained", "score_baselines", "summarize_baselines"]
+__all__ = ["baseline_counts", "baselines_markdown", "check_trained", "score_baselines", "summarize_baselines"]
 
 log = logging.getLogger("somtorch.validate")
 
@@ -37,31 +37,40 @@ def check_trained(names: list[str], specs: list[Any]) -> None:
 def score_baselines(caches: list[Any], names: list[str], reduction: Any) -> dict[str, dict[str, Any]]:
     """``{frame: {baseline: counts}}`` for every frame cache (``experiments.validate_cache.SceneCache``);
     a baseline that does not apply to a frame (no metric camera) gets None."""
+    out: dict[str, dict[str, Any]] = {}
+    for c in caches:
+        # (the scene is not kept: 352 frames' maps would stay in memory)
+        out[c.spec.name] = per = baseline_counts(c.fresh_scene(), names, reduction, c.spec.camera)
+        log.info("%s: baselines %s", c.spec.name, ", ".join(
+            f"{n} {'–' if p is None else 'useful' if p['useful_hits'] else 'miss'}" for n, p in per.items()))
+    return out
+
+
+def baseline_counts(scene: Any, names: list[str], reduction: Any, camera: str | None) -> dict[str, Any]:
+    """``{baseline: counts}`` of one run of each baseline of ``names`` on ``scene`` (None where it
+    does not apply, e.g. no metric camera); ``camera``: the frame's generator camera (a trained
+    baseline runs the model of its fold)."""
     from somtorch.evaluation import all_objects
     from somtorch.saliency_metrics import saliency_scores
 
     from .real_scenes import run_baseline
 
-    out: dict[str, dict[str, Any]] = {}
-    for c in caches:
-        scene, per = c.fresh_scene(), {}  # (not kept: 352 frames' maps would stay in memory)
-        for name in names:
-            t0 = time.perf_counter()
-            runs = run_baseline(name, scene, reduction, left_out=c.spec.camera)  # a trained one: its fold
-            if runs is None:
-                per[name] = None
-                continue
-            (r,) = runs
-            target = all_objects(scene)
-            per[name] = {"runs": 1, "useful_hits": int(r.score.useful_hit), "identified_95": int(r.score.identified_95),
-                         "all_objects_hits": int(target.hit(r.reduction)) if target is not None else 0,
-                         "no_object": int(r.no_object), "reduction": r.score.reduction_union,
-                         "saliency": saliency_scores(r.reduction.mask, scene.objects > 0),
-                         "wall_s": time.perf_counter() - t0}
-        out[c.spec.name] = per
-        log.info("%s: baselines %s", c.spec.name, ", ".join(
-            f"{n} {'–' if p is None else 'useful' if p['useful_hits'] else 'miss'}" for n, p in per.items()))
-    return out
+    per: dict[str, Any] = {}
+    for name in names:
+        t0 = time.perf_counter()
+        runs = run_baseline(name, scene, reduction, left_out=camera)
+        if runs is None:
+            per[name] = None
+            continue
+        (r,) = runs
+        target = all_objects(scene)
+        per[name] = {"runs": 1, "useful_hits": int(r.score.useful_hit),
+                     "identified_95": int(r.score.identified_95),
+                     "all_objects_hits": int(target.hit(r.reduction)) if target is not None else 0,
+                     "no_object": int(r.no_object), "reduction": r.score.reduction_union,
+                     "saliency": saliency_scores(r.reduction.mask, scene.objects > 0),
+                     "wall_s": time.perf_counter() - t0}
+    return per
 
 
 def summarize_baselines(table: Any, rows: list[dict[str, Any]], names: list[str]) -> dict[str, Any]:

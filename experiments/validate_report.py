@@ -110,19 +110,37 @@ def to_markdown(report: dict[str, Any]) -> str:
                        f"{kn['verdict'] if i == 0 else ''} |")
     robust = report.get("robustness") or {}
     if robust:
-        kinds = list(robust)
-        out += ["", "Robustness (defaults; every frame transformed; useful / all-objects hits):", "",
-                "| transform | useful | all-obj | runs |", "|---|---|---|---|"]
-        base = [r["default"] for r in report["rows"]]
-        out.append(f"| as given | {sum(b['useful_hits'] for b in base)} | {sum(b['all_objects_hits'] for b in base)} | "
-                   f"{sum(b['runs'] for b in base)} |")
-        for k in kinds:
+        names = [n for n in (report["rows"][0].get("baselines") or {})] if report["rows"] else []
+        head = "| transform | useful | all-obj | runs | useful % | " + "".join(f"{n} useful % | "
+                                                                          for n in names)
+        out += ["", "Robustness (defaults; every frame transformed; useful / all-objects hits, and the "
+                "useful share of the runs — the task baselines' on the same transformed frames, one run "
+                "each, – where one does not apply):", "", head.rstrip(),
+                "|---|---|---|---|---|" + "---|" * len(names)]
+
+        def row(label: str, scores: list[dict[str, Any]], peers: list[dict[str, Any]]) -> str:
+            runs = sum(x["runs"] for x in scores)
+            cells = [f"| {label} | {sum(x['useful_hits'] for x in scores)} | "
+                     f"{sum(x['all_objects_hits'] for x in scores)} | {runs} | {_useful_share(scores)} |"]
+            for n in names:
+                got = [p[n] for p in peers if p.get(n) is not None]
+                cells.append(f" {_useful_share(got)} |")
+            return "".join(cells)
+
+        out.append(row("as given", [r["default"] for r in report["rows"]],
+                       [r.get("baselines") or {} for r in report["rows"]]))
+        for k in robust:
             v = list(robust[k].values())
-            out.append(f"| {k} | {sum(x['useful_hits'] for x in v)} | {sum(x['all_objects_hits'] for x in v)} | "
-                       f"{sum(x['runs'] for x in v)} |")
+            out.append(row(k, v, [x.get("baselines") or {} for x in v]))
     from .validate_baselines import baselines_markdown
 
     return "\n".join(out) + "\n" + baselines_markdown(report)
+
+
+def _useful_share(scores: list[dict[str, Any]]) -> str:
+    """The useful share of the runs of ``scores`` (count dicts) in %, or – without a run."""
+    runs = sum(x["runs"] for x in scores)
+    return f"{100 * sum(x['useful_hits'] for x in scores) / runs:.1f}" if runs else "–"
 
 
 def gallery(cache: Any, path: Path, overrides: dict[str, Any] | None = None, member: int = 0) -> Path:

@@ -243,6 +243,18 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     md = (tmp_path / "validate.md").read_text()
     assert "| **macro, real** |" in md and "| objects.merge | 0.75 | 0.0 (neutral) |" in md
     assert list(rep["robustness"]) == ["flip"] and "| flip |" in md
+    # the probe runs the task baselines on the same transformed frames, and the table reads them
+    flip = rep["robustness"]["flip"]
+    assert set(flip) == {r["frame"] for r in rep["rows"]}
+    for got in flip.values():
+        assert list(got["baselines"]) == ["plane_components", "uv_disparity"]
+        pc = got["baselines"]["plane_components"]
+        assert pc["runs"] == 1 and 0 <= pc["useful_hits"] <= pc["identified_95"] <= 1
+    som = 100 * sum(v["useful_hits"] for v in flip.values()) / sum(v["runs"] for v in flip.values())
+    pcs = 100 * sum(v["baselines"]["plane_components"]["useful_hits"] for v in flip.values()) / len(flip)
+    line = next(ln for ln in md.splitlines() if ln.startswith("| flip |"))
+    assert line.split(" | ")[4:6] == [f"{som:.1f}", f"{pcs:.1f}"], line
+    assert "| plane_components useful % | uv_disparity useful % |" in md
     assert "Selection ceiling" in md and 0 <= sm["macro_real"]["default_best_area_hits"] <= 1
     assert sorted(p.name for p in (tmp_path / "gallery").glob("*.png")) == sorted(f"{r['frame']}.png" for r in rep["rows"])
     # the task baselines (default: plane_components, uv_disparity), one run per frame, beside the defaults
