@@ -48,14 +48,14 @@ class SceneCache:
 
         from somtorch.config import with_overrides
         from somtorch.disparity.filters import median_filter
-        from somtorch.pipeline import denoised, detect, on_support, prepare
+        from somtorch.pipeline import detect, on_support, prepare, read_map
         from somtorch.segmenters import run_segmenter
 
         cfg = with_overrides(self.base, overrides)
         up = _key({k: v for k, v in overrides.items() if k.split(".")[0] in UPSTREAM})
         if up not in self._seg:
-            scene, window = denoised(self.scene, cfg)
-            valid, ground, usable, feats, train = prepare(scene, cfg)
+            scene, window, sigma = read_map(self.scene, cfg)
+            valid, ground, usable, feats, train = prepare(scene, cfg, sigma=sigma)
             seg = run_segmenter(feats, train, on_support(scene, ground, cfg.features)[0], usable, cfg)
             # kept as int16 (a SOM has far fewer neurons): 30 members x 22 scenes x every upstream
             # setting of the grid as int64 label maps outgrew 24 GiB

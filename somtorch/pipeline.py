@@ -27,7 +27,7 @@ from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, Pi
 from .core import SOM
 from .core.threads import contended
 from .disparity.features import Features, make_features, relative_disparity
-from .disparity.filters import median_filter
+from .disparity.filters import median_filter, median_noise
 from .disparity.scene import Scene
 from .resources import Estimate, estimate
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
@@ -132,19 +132,24 @@ def denoised(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int]:
     ``cfg.features.median`` window (:func:`~somtorch.disparity.filters.median_filter`); else the
     scene as given. A dense sensor's noise splits one surface into speckled segments that no
     opening, link or box rule puts back together (``docs/tuned_constants.md``)."""
-    return _denoise(scene, cfg)[:2]
+    return read_map(scene, cfg)[:2]
 
 
-def _denoise(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int, float | None]:
-    """:func:`denoised`, and σ of the scene it returns where measured (a map read as given: the
-    ground fit reads it instead of measuring it again), else None."""
+def read_map(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int, float | None]:
+    """:func:`denoised`, and the per-pixel noise σ (px) of the scene it returns, for the ground
+    band (:func:`~somtorch.tasks.ground.fit_ground_plane`'s ``sigma``): as measured where the map
+    is read as given; where it was filtered, what the median leaves of the measured noise
+    (:func:`~somtorch.disparity.filters.median_noise`), which the filtered map's neighbour
+    differences cannot read; None where nothing was measured (``features.median`` ≤ 1: the
+    ground fit measures it)."""
     k = cfg.features.median
     if k <= 1:
         return scene, 0, None
     sigma = noise_sigma(scene.disparity, scene.valid)
     if cfg.ground.noise_band * sigma <= cfg.ground.tol_px:
         return scene, 0, sigma
-    return replace(scene, disparity=median_filter(scene.disparity, scene.valid, k)), k, None
+    return (replace(scene, disparity=median_filter(scene.disparity, scene.valid, k)), k,
+            median_noise(sigma, k))
 
 
 def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
@@ -407,7 +412,7 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
     # more than the cores other processes leave free (the same bits at any count; tests/test_pipeline.py)
     with interrupt.deferred(), contended():
         with timer("ground"):  # (the noise estimate: the ground band's input)
-            scene, window, sigma = _denoise(scene, cfg)
+            scene, window, sigma = read_map(scene, cfg)
         valid, ground, usable, feats, train = prepare(scene, cfg, timer, sigma=sigma)
         work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
         seg = run_segmenter(feats, train, work, usable, cfg, progress=progress, log_training=log_training,

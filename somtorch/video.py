@@ -31,7 +31,7 @@ from .config import PipelineConfig, WarmStartConfig
 from .core import SOM
 from .core.threads import contended
 from .disparity.scene import Scene
-from .pipeline import MemberResult, _denoise, _Timer, detect, map_stride, on_support, prepare
+from .pipeline import MemberResult, _Timer, detect, map_stride, on_support, prepare, read_map
 from .segmenters import Segmentation, _from_prototypes, run_segmenter
 from .tasks.ground import GroundPlane, fit_ground_plane, rim_share, view_rim
 from .tasks.segmentation import segment
@@ -116,7 +116,7 @@ class SequenceRunner:
     def _step(self, scene: Scene) -> FrameResult:
         cfg, timer, reused = self.cfg, _Timer(), [False]
         with timer("ground"):  # a noisy frame through the median, as run_pipeline reads it
-            scene, _, sigma = _denoise(scene, cfg)
+            scene, _, sigma = read_map(scene, cfg)
 
         def ground_fn(valid: torch.Tensor) -> GroundPlane | None:
             g, reused[0] = self._ground_for(scene, valid, sigma)

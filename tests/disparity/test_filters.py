@@ -59,3 +59,15 @@ def test_size_one_is_a_copy_and_an_even_size_is_refused():
     assert torch.equal(out, d) and out is not d
     with pytest.raises(ValueError, match="odd"):
         median_filter(d, valid, 4)
+
+
+@pytest.mark.parametrize("size", [3, 5])
+def test_median_noise_is_the_error_the_median_leaves_of_gaussian_noise(size):
+    """``median_noise``: the median of size² Gaussian samples errs by σ·√(π/2)/size."""
+    from somtorch.disparity.filters import median_filter, median_noise
+
+    noise = 1.5 * torch.randn(300, 300, generator=torch.Generator().manual_seed(size))
+    out = median_filter(10.0 + noise, torch.ones(300, 300, dtype=torch.bool), size)
+    err = float((out - 10.0)[size:-size, size:-size].std())
+    assert median_noise(1.5, size) == pytest.approx(err, rel=0.06)
+    assert median_noise(1.5, 1) == 1.5 and median_noise(1.5, 0) == 1.5
