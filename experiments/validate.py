@@ -256,7 +256,7 @@ def _progress(total: int) -> Any:
     return progress_bar(total, "frames", "frame")
 
 
-def transformed(caches: list[SceneCache], kind: str, baselines: list[str] = (),
+def transformed(caches: list[SceneCache], kind: str, baselines: list[str] | None = None,
                 reduction: Any = None) -> dict[str, dict[str, Any]]:
     """The default scores of every scene of ``caches`` transformed by ``add_junk(scene, kind)``,
     by scene name, each with ``"baselines"``: the task baselines of ``baselines`` run once on the
@@ -276,8 +276,7 @@ def transformed(caches: list[SceneCache], kind: str, baselines: list[str] = (),
         scene = add_junk(c.scene, kind, seed=sum(map(ord, c.spec.name)))
         tc = SceneCache(c.spec, scene, c.base)
         out[c.spec.name] = sc = tc.score({})
-        sc["baselines"] = (baseline_counts(scene, list(baselines), reduction, c.spec.camera)
-                           if baselines else {})
+        sc["baselines"] = baseline_counts(scene, baselines, reduction, c.spec.camera) if baselines else {}
         log.info("%s (%s): default %d useful of %d (%.1f s)", c.spec.name, kind, sc["useful_hits"],
                  sc["runs"], time.perf_counter() - t0)
     return out

@@ -110,7 +110,7 @@ def to_markdown(report: dict[str, Any]) -> str:
                        f"{kn['verdict'] if i == 0 else ''} |")
     robust = report.get("robustness") or {}
     if robust:
-        names = [n for n in (report["rows"][0].get("baselines") or {})] if report["rows"] else []
+        names = list(report["rows"][0].get("baselines") or {}) if report["rows"] else []
         head = "| transform | useful | all-obj | runs | useful % | " + "".join(f"{n} useful % | "
                                                                           for n in names)
         out += ["", "Robustness (defaults; every frame transformed; useful / all-objects hits, and the "

@@ -280,7 +280,7 @@ def test_a_noisy_map_is_read_through_the_median_and_a_clean_one_as_given():
         replace(cfg.features, median=4)
 
 
-def test_the_noise_is_measured_once_for_a_map_read_as_given(monkeypatch):
+def test_the_noise_is_measured_once_whether_the_map_is_filtered_or_not(monkeypatch):
     """The median's trigger and the ground band read the same σ, measured once: on a map read as
     given the band takes it as measured; on a noisy one, filtered, what the median leaves of it
     (the filtered map's neighbour differences underrate it: ``median_noise``)."""
