@@ -35,6 +35,7 @@ from .tasks.detect import MapContext, find_objects
 from .tasks.ground import GroundPlane, fit_ground_plane, noise_sigma
 from .tasks.objects import NeuronStats, ObjectArea
 from .tasks.reduction import Reduction, reduce_map, valid_integral
+from .tasks.refine import _square
 from .tasks.scoring import Score, optimal_reduction, score_reduction
 
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
@@ -77,8 +78,8 @@ class PipelineResult:
         prototypes: feature-space centres ``(E, K, D)`` (SOM weights, k-means centres), or None.
         segmentation: the segmenter's own result, or None.
         config: the config that made it.
-        median: the window of the median the map was read through (``features.median`` where the
-            map is noisy, :func:`denoised`), 0 = read as given.
+        median: the window of the median the map was read through (``features.median`` or wider
+            where the map is noisy, :func:`denoised`), 0 = read as given.
     """
 
     features: Features
@@ -128,10 +129,13 @@ def _min_pixels(cfg: PipelineConfig) -> int:
 def denoised(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int]:
     """The scene every step reads, and the median window it was read through (0 = none): where the
     map's per-pixel noise sets the ground band (``cfg.ground.noise_band`` × σ > ``cfg.ground.tol_px``,
-    σ = :func:`~somtorch.tasks.ground.noise_sigma`), its valid disparities through a
-    ``cfg.features.median`` window (:func:`~somtorch.disparity.filters.median_filter`); else the
-    scene as given. A dense sensor's noise splits one surface into speckled segments that no
-    opening, link or box rule puts back together (``docs/tuned_constants.md``)."""
+    σ = :func:`~somtorch.tasks.ground.noise_sigma`), its valid disparities through a median
+    (:func:`~somtorch.disparity.filters.median_filter`) of a ``cfg.features.median`` window, or of
+    the smallest wider odd one whose left-over noise (:func:`~somtorch.disparity.filters.median_noise`)
+    no longer sets the band, at most the object step's solidity square (``objects.solidity_size``
+    × the shorter side: what is thinner is not kept as an object anyway); else the scene as given.
+    A dense sensor's noise splits one surface into speckled segments that no opening, link or box
+    rule puts back together (``docs/tuned_constants.md``)."""
     return read_map(scene, cfg)[:2]
 
 
@@ -146,8 +150,14 @@ def read_map(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int, float | Non
     if k <= 1:
         return scene, 0, None
     sigma = noise_sigma(scene.disparity, scene.valid)
-    if cfg.ground.noise_band * sigma <= cfg.ground.tol_px:
+    band = cfg.ground.noise_band
+    if band * sigma <= cfg.ground.tol_px:
         return scene, 0, sigma
+    # a wider window while what the median leaves still sets the band, up to the object step's
+    # solidity square (what is thinner than it is not kept as an object anyway)
+    widest = max(k, _square(scene.disparity.shape, cfg.objects.solidity_size, 1))
+    while band * median_noise(sigma, k) > cfg.ground.tol_px and k + 2 <= widest:
+        k += 2
     return (replace(scene, disparity=median_filter(scene.disparity, scene.valid, k)), k,
             median_noise(sigma, k))
 

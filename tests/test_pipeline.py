@@ -308,20 +308,20 @@ def test_the_noise_is_measured_once_whether_the_map_is_filtered_or_not(monkeypat
 
 
 def test_a_filtered_map_s_ground_band_is_what_the_median_leaves_of_its_noise():
-    """A dense sensor's floor with 0.8 px of noise, read through the 3 × 3 median: each filtered
-    pixel still errs by ~0.33 px, which the filtered map's neighbour differences read as ~0.15
-    (neighbouring windows share most of their pixels). The band takes the median's standard error
-    of the measured noise, so the floor stays one plane; with the neighbour reading a tenth of it
-    is left as speckle."""
+    """A dense sensor's floor with 0.8 px of noise, read through the 3 × 3 median (a 120-px side:
+    the solidity square allows no wider one): each filtered pixel still errs by ~0.33 px, which
+    the filtered map's neighbour differences read as ~0.15 (neighbouring windows share most of
+    their pixels). The band takes the median's standard error of the measured noise, so the floor
+    stays one plane; with the neighbour reading a tenth of it is left as speckle."""
     from somtorch.disparity.filters import median_noise
     from somtorch.disparity.scene import scene_from_arrays
     from somtorch.pipeline import read_map
     from somtorch.tasks.ground import fit_ground_plane, noise_sigma
 
-    ys, xs = torch.meshgrid(torch.arange(200.0), torch.arange(300.0), indexing="ij")
-    truth = 20.0 + 0.01 * xs + 0.03 * ys
-    noisy = truth + 0.8 * torch.randn(200, 300, generator=torch.Generator().manual_seed(3))
-    scene = scene_from_arrays(noisy, torch.ones(200, 300, dtype=torch.bool), name="noisy_floor")
+    ys, xs = torch.meshgrid(torch.arange(120.0), torch.arange(300.0), indexing="ij")
+    truth = 20.0 + 0.01 * xs + 0.05 * ys
+    noisy = truth + 0.8 * torch.randn(120, 300, generator=torch.Generator().manual_seed(3))
+    scene = scene_from_arrays(noisy, torch.ones(120, 300, dtype=torch.bool), name="noisy_floor")
     cfg = PipelineConfig()
     read, window, sigma = read_map(scene, cfg)
     assert window == 3 and sigma == pytest.approx(median_noise(noise_sigma(noisy, scene.valid), 3))
@@ -331,6 +331,29 @@ def test_a_filtered_map_s_ground_band_is_what_the_median_leaves_of_its_noise():
     assert plane.tol == pytest.approx(cfg.ground.noise_band * sigma) and plane.inlier_frac > 0.93
     underrated = fit_ground_plane(read.disparity, read.valid, cfg.ground)  # σ read off the filtered map
     assert underrated.tol < plane.tol and underrated.inlier_frac < 0.9
+
+
+@pytest.mark.parametrize("sigma, size, window, capped", [
+    (0.5, (300, 400), 3, False), (0.8, (300, 400), 5, False), (1.1, (300, 400), 7, False),
+    (1.5, (300, 400), 7, True), (1.1, (120, 160), 3, True)])
+def test_a_noisier_map_is_read_through_a_wider_median(sigma, size, window, capped):
+    """The smallest odd window from ``features.median`` (3) whose left-over noise no longer sets
+    the ground band (2 · σ·√(π/2)/k ≤ 0.5 px), at most the object step's solidity square (7 px on
+    a 300-px side, 3 px on a 120-px one: the last two cases stop there)."""
+    from somtorch.disparity.filters import median_noise
+    from somtorch.disparity.scene import scene_from_arrays
+    from somtorch.pipeline import read_map
+
+    h, w = size
+    ys, xs = torch.meshgrid(torch.arange(float(h)), torch.arange(float(w)), indexing="ij")
+    d = 30.0 + 0.02 * xs + 0.01 * ys + sigma * torch.randn(h, w, generator=torch.Generator().manual_seed(1))
+    scene = scene_from_arrays(d, torch.ones(h, w, dtype=torch.bool), name=f"noisy_{sigma}")
+    cfg = PipelineConfig()
+    read, k, left = read_map(scene, cfg)
+    assert k == window and left == pytest.approx(median_noise(sigma, k), rel=0.05)
+    assert (cfg.ground.noise_band * left <= cfg.ground.tol_px) != capped
+    if k > 3:  # the pipeline reads it through the same window
+        assert run_pipeline(scene, PipelineConfig(ensemble=1), metrics=False).median == k
 
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
