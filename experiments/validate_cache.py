@@ -100,8 +100,9 @@ class SceneCache:
 
             r = self.base.reduction
             self.scores[key]["best_area_hits"] = selection_ceiling(
-                members, self.scene.scored_mask(self.base.object_id), self.scene.valid, s[0].x_opt, tolerance_px=r.tolerance_px,
-                tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image)
+                members, self.scene.scored_mask(self.base.object_id), self.scene.valid, s[0].x_opt,
+                tolerance_px=r.tolerance_px, tolerance_frac=r.tolerance_frac,
+                tolerance_image=r.tolerance_image)
         if saliency:
             from somtorch.saliency_metrics import saliency_scores
 

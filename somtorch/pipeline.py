@@ -35,7 +35,7 @@ from .tasks.detect import MapContext, find_objects
 from .tasks.ground import GroundPlane, fit_ground_plane, noise_sigma
 from .tasks.objects import NeuronStats, ObjectArea
 from .tasks.reduction import Reduction, reduce_map, valid_integral
-from .tasks.refine import _square
+from .tasks.refine import solidity_square
 from .tasks.scoring import Score, optimal_reduction, score_reduction
 
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
@@ -155,7 +155,7 @@ def read_map(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int, float | Non
         return scene, 0, sigma
     # a wider window while what the median leaves still sets the band, up to the object step's
     # solidity square (what is thinner than it is not kept as an object anyway)
-    widest = max(k, _square(scene.disparity.shape, cfg.objects.solidity_size, 1))
+    widest = max(k, solidity_square(scene.disparity.shape, cfg.objects.solidity_size))
     while band * median_noise(sigma, k) > cfg.ground.tol_px and k + 2 <= widest:
         k += 2
     return (replace(scene, disparity=median_filter(scene.disparity, scene.valid, k)), k,

@@ -25,7 +25,7 @@ from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
                       pair_continuity, rank_score, select_areas, surround_pairs)
 from .reduction import reduce_map, valid_integral
-from .refine import _opened_share, _square, box_purity, map_solidity, merge_adjacent, refine_box
+from .refine import _opened_share, box_purity, map_solidity, merge_adjacent, refine_box, solidity_square
 
 __all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "linkable_segments", "object_mode",
            "rank_score"]
@@ -85,7 +85,7 @@ class MapContext:
         if object_mode(ground, cfg)[0] == "support":
             islands, continuity = _islands(segmented), pair_continuity(disparity)
         uncut = None if cfg.rule == "paper" else _regions(segmented, valid,
-                                                          _square(disparity.shape, cfg.solidity_size, 1))
+                                                          solidity_square(disparity.shape, cfg.solidity_size))
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
                    map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity),
                    islands, continuity, uncut, 0 if islands is None else int(islands.max()) + 1)
@@ -281,7 +281,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     ranked = select_areas(areas, stats, cfg, on_support=on_support)
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first, n_areas = [], None, 0
-    square = _square(labels.shape, cfg.solidity_size, 1)
+    square = solidity_square(labels.shape, cfg.solidity_size, 1)
     best = max((rank_score(a, cfg, on_support=on_support) for a in ranked), default=0.0)
     for cand in ranked:
         if bool(taken[torch.tensor(cand.neurons)].any()):

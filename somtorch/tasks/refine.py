@@ -181,11 +181,14 @@ def solidity(mask: torch.Tensor, *, size: float = _D.solidity_size, stride: int 
         ``mask`` ``(H, W)`` bool.
     """
     s = max(1, int(stride))
-    return _opened_share(mask[::s, ::s], _square(mask.shape, size, s))
+    return _opened_share(mask[::s, ::s], solidity_square(mask.shape, size, s))
 
 
-def _square(shape: tuple[int, ...], size: float, stride: int) -> int:
-    return max(3, 2 * round(size * min(shape) / stride / 2) + 1)  # odd: a centred, symmetric square
+def solidity_square(shape: tuple[int, ...], size: float, stride: int = 1) -> int:
+    """The side in px of the solidity square (``AreaConfig.solidity_size`` = ``size`` × the shorter
+    side of a map of ``shape`` (H, W), on a grid of every ``stride``-th pixel): odd, so that it is
+    centred and symmetric, and at least 3."""
+    return max(3, 2 * round(size * min(shape) / stride / 2) + 1)
 
 
 def _opened_share(sampled: torch.Tensor, k: int) -> float:

@@ -11,7 +11,7 @@ import torch
 from somtorch.config import AreaConfig
 from somtorch.tasks.detect import MapContext, find_objects
 from somtorch.tasks.ground import GroundPlane
-from somtorch.tasks.refine import _square
+from somtorch.tasks.refine import solidity_square
 
 H, W, FLOOR_D = 80, 120, 5.0
 
@@ -84,7 +84,7 @@ def _unplaned(labels: torch.Tensor, disp: torch.Tensor, valid: torch.Tensor, cfg
 
 def test_a_wide_invalid_gap_splits_an_area_a_narrow_one_does_not():
     cfg = AreaConfig()
-    k = _square((H, W), cfg.solidity_size, 1)
+    k = solidity_square((H, W), cfg.solidity_size, 1)
     wide = _unplaned(*_gap_map(k + 5), cfg)
     assert sorted(a.box for a in wide.kept if a.neurons == [0]) == [(10, 10, 29, 29), (70, 40, 109, 69)]
     # a gap the closing with the solidity square fills (a sparse map's holes) joins what lies

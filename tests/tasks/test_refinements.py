@@ -268,7 +268,7 @@ def test_kept_areas_reads_each_candidates_window_with_the_whole_maps_result():
 
     from somtorch.tasks.detect import _window
     from somtorch.tasks.objects import label_mask
-    from somtorch.tasks.refine import _opened_share, _square
+    from somtorch.tasks.refine import _opened_share, solidity_square
 
     h, w = 90, 120
     labels = torch.full((h, w), 3, dtype=torch.long)  # the background
@@ -286,7 +286,7 @@ def test_kept_areas_reads_each_candidates_window_with_the_whole_maps_result():
     areas = [a for a in find_object_areas(stats.mean_d, None, stats, cfg) if 3 not in a.neurons]
     kept = kept_areas(areas, stats, labels, cfg, ctx)
     assert sorted(a.neurons for a in kept) == [[0], [1], [2]]
-    square = _square(labels.shape, cfg.solidity_size, 1)
+    square = solidity_square(labels.shape, cfg.solidity_size, 1)
     for a in kept:
         own = label_mask(labels, a.neurons)
         full = refine_box(replace(a, box=a.segment_box or a.box), labels, coverage=cfg.box_coverage,
