@@ -54,7 +54,10 @@ def _load(spec: Any, data_dir: Path) -> Any:
                              camera=gt.camera, name=spec.name)
 
 
-JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S", "quantize:Q", "scale:F")
+JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S", "quantize:Q", "scale:F", "bowl:P",
+              "blotch:S")
+#: ``blotch:S``: the correlation length of its noise, as a share of the image's shorter side.
+BLOTCH_SCALE = 0.02
 
 
 def check_junk_kind(kind: str) -> None:
@@ -63,7 +66,9 @@ def check_junk_kind(kind: str) -> None:
     for prefix, what, example in (("resample:", "a positive factor", "resample:0.5"),
                                   ("noise:", "a positive standard deviation in px", "noise:0.5"),
                                   ("quantize:", "a positive step in px", "quantize:1"),
-                                  ("scale:", "a positive factor", "scale:0.5")):
+                                  ("scale:", "a positive factor", "scale:0.5"),
+                                  ("bowl:", "a positive relative error", "bowl:0.01"),
+                                  ("blotch:", "a positive standard deviation in px", "blotch:0.5")):
         if kind.startswith(prefix):
             try:
                 ok = float(kind.split(":", 1)[1]) > 0
@@ -104,6 +109,30 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
     if kind.startswith("scale:"):  # another rig: f·B (focal length × baseline) multiplies every disparity
         f = float(kind.split(":", 1)[1])
         return dataclasses.replace(scene, disparity=torch.where(scene.valid, scene.disparity * f, scene.disparity),
+                                   name=f"{scene.name}+{kind}")
+    if kind.startswith("bowl:"):  # a dense sensor's systematic error: relative, growing to the corners
+        p = float(kind.split(":", 1)[1])
+        h, w = scene.disparity.shape
+        ys = torch.linspace(-1.0, 1.0, h, dtype=torch.float64)[:, None]
+        xs = torch.linspace(-1.0, 1.0, w, dtype=torch.float64)[None, :]
+        gain = (1.0 + p * (ys * ys + xs * xs - 1.0)).to(scene.disparity.dtype)  # 1 − p centre, 1 + p corner
+        bent = torch.where(scene.valid, scene.disparity * gain, scene.disparity)
+        return dataclasses.replace(scene, disparity=bent, name=f"{scene.name}+{kind}")
+    if kind.startswith("blotch:"):  # a filtered dense sensor's noise: correlated over a few px, std S
+        import torch.nn.functional as F
+
+        sigma = float(kind.split(":", 1)[1])
+        h, w = scene.disparity.shape
+        s = max(1.0, BLOTCH_SCALE * min(h, w))
+        r = int(3 * s)
+        k = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=torch.float64) / s) ** 2)
+        k = (k / k.sum()).float()
+        g = torch.Generator().manual_seed(seed)
+        n = torch.randn(1, 1, h + 2 * r, w + 2 * r, generator=g)
+        n = F.conv2d(F.conv2d(n, k.view(1, 1, -1, 1)), k.view(1, 1, 1, -1))[0, 0]
+        noisy = scene.disparity + sigma * n / n.std()
+        keep = scene.valid & (noisy > 0)
+        return dataclasses.replace(scene, disparity=torch.where(keep, noisy, scene.disparity), valid=keep,
                                    name=f"{scene.name}+{kind}")
     if kind.startswith("quantize:"):  # a sensor that reports whole steps (integer or 8-bit disparity)
         q = float(kind.split(":", 1)[1])

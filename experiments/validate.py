@@ -70,8 +70,8 @@ class ValidateConfig(RunConfig):
         loss_margin: the largest drop of one dataset's hit rate a change may cost.
         ni_margin: non-inferiority margin of a removal (and of the all-objects reading).
         transforms: robustness checks: every frame transformed (``flip``, ``resample:F``, ``noise:S``,
-            ``quantize:Q``, ``scale:F``, ``pole``, ``border``, ``specks``; experiments.scenes.add_junk) and scored
-            with the defaults.
+            ``quantize:Q``, ``scale:F``, ``bowl:P``, ``blotch:S``, ``pole``, ``border``, ``specks``;
+            experiments.scenes.add_junk) and scored with the defaults.
         baselines: task baselines (somtorch.tasks.baselines) scored beside the defaults, one run per frame.
     """
 
@@ -86,8 +86,8 @@ class ValidateConfig(RunConfig):
     resume: Optional[str] = None  # ... and read them back instead of scoring again
     loss_margin: float = 0.10  # the largest drop of one dataset's hit rate a change may cost
     ni_margin: float = 0.02  # non-inferiority margin of a removal (and of the all-objects reading)
-    # robustness: every frame transformed (experiments.scenes.add_junk: "flip", "resample:F",
-    # "pole", "border", "specks") and scored with the defaults, beside the frames as they are
+    # robustness: every frame transformed (experiments.scenes.add_junk: "flip", "resample:F", "noise:S",
+    # "bowl:P", "blotch:S", ...) and scored with the defaults, beside the frames as they are
     transforms: list[str] = field(default_factory=list)
     # task baselines scored beside the defaults (one run per frame; those that need no checkpoint)
     baselines: list[str] = field(default_factory=lambda: ["plane_components", "uv_disparity"])

@@ -312,7 +312,8 @@ def test_a_filtered_map_s_ground_band_is_what_the_median_leaves_of_its_noise():
     the solidity square allows no wider one): each filtered pixel still errs by ~0.33 px, which
     the filtered map's neighbour differences read as ~0.15 (neighbouring windows share most of
     their pixels). The band takes the median's standard error of the measured noise, so the floor
-    stays one plane; with the neighbour reading a tenth of it is left as speckle."""
+    stays one plane (with the neighbour reading alone a tenth of it was left as speckle; the plane's
+    own spread now recovers that too)."""
     from somtorch.disparity.filters import median_noise
     from somtorch.disparity.scene import scene_from_arrays
     from somtorch.pipeline import read_map
@@ -329,8 +330,11 @@ def test_a_filtered_map_s_ground_band_is_what_the_median_leaves_of_its_noise():
     assert sigma == pytest.approx(err, rel=0.1) and noise_sigma(read.disparity, read.valid) < 0.6 * err
     plane = fit_ground_plane(read.disparity, read.valid, cfg.ground, sigma=sigma)
     assert plane.tol == pytest.approx(cfg.ground.noise_band * sigma) and plane.inlier_frac > 0.93
-    underrated = fit_ground_plane(read.disparity, read.valid, cfg.ground)  # σ read off the filtered map
-    assert underrated.tol < plane.tol and underrated.inlier_frac < 0.9
+    # σ read off the filtered map sets no band above tol_px; the plane's own spread about it (the
+    # median's error is correlated: ground.own_band) still widens it to hold the floor
+    underrated = fit_ground_plane(read.disparity, read.valid, cfg.ground)
+    assert cfg.ground.noise_band * noise_sigma(read.disparity, read.valid) < cfg.ground.tol_px
+    assert underrated.tol > 1.2 * cfg.ground.tol_px and underrated.inlier_frac > 0.93
 
 
 @pytest.mark.parametrize("sigma, size, window, capped", [

@@ -38,7 +38,10 @@ class GroundConfig(Validated):
             stored in steps of q px, :func:`~somtorch.tasks.ground.quantum`, adds q²/12 to the
             variance: 2/√12 ≈ 0.58 px on an integer map, whose floor is a flight of terraces up to
             0.5 px off the plane); dropped where it exceeds half the map's 1–99 % disparity range (a
-            map of noise, no surface). 0 = off.
+            map of noise, no surface). A support plane (not one the position rule alone verifies)
+            takes this many times the spread of its own pixels about it where that is wider and
+            resolved (:func:`~somtorch.tasks.ground.own_band`: an error correlated across pixels, a
+            dense sensor's filtered map, which neighbour differences do not see). 0 = off.
         min_inlier_frac: a plane needs this share of the valid pixels.
         min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
             of the disparity range: a floor spans it, from its horizon to the nearest thing in view;

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import torch
 
 from ..config import GroundConfig
+from ..config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX
 from ..config.options import GROUND_RULES as RULES
 from ..validation import check_tensor
 
@@ -135,21 +136,91 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     plausible = good & oriented if cfg.rule == "position" else good
     if not bool(plausible.any()):
         return None
-    # inlier counts of every hypothesis in float32 (disparities of a few hundred px, a band of at
-    # least tol_px: far above its rounding); element-wise, so the same bits at any thread count
-    score = ((_predict(coef, pts) - pts[None, :, 2].float()).abs_() < tol).sum(1).masked_fill(~plausible, -1)
-    # the support-surface tests are constraints of the model, checked on a sample of the whole map
-    # for every hypothesis: the best plane that passes them, not the best plane, is tested on the
-    # full map (a single best hypothesis near a test's threshold made the verdict a lottery of the
-    # RANSAC seed)
-    q = _sample(ok.nonzero(), disparity, cfg.sample, g)
-    rim = view_rim(ok)
-    score = score.masked_fill(~_passes_sampled(coef, q, _sample(rim.nonzero(), disparity, cfg.sample, g), tol,
-                                               oriented, cfg), -1)
-    best = int(torch.argmax(score))  # the first of the best: argmax returns the lowest index of ties
-    if int(score[best]) < 0:
-        return None
-    return _verified(coef[best], pts, disparity, ok, n_valid, tol, min_b, cfg, rim)
+    state = g.get_state()
+
+    def best_plane(tol: float) -> GroundPlane | None:
+        """The best hypothesis that passes the tests with band ``tol``, verified (the same draws of
+        ``g`` for every band)."""
+        g.set_state(state)
+        # inlier counts of every hypothesis in float32 (disparities of a few hundred px, a band of
+        # at least tol_px: far above its rounding); element-wise, so the same bits at any thread count
+        score = (_predict(coef, pts) - pts[None, :, 2].float()).abs_() < tol
+        score = score.sum(1).masked_fill(~plausible, -1)
+        # the support-surface tests are constraints of the model, checked on a sample of the whole
+        # map for every hypothesis: the best plane that passes them, not the best plane, is tested on
+        # the full map (a single best hypothesis near a test's threshold made the verdict a lottery
+        # of the RANSAC seed)
+        q = _sample(ok.nonzero(), disparity, cfg.sample, g)
+        rim = view_rim(ok)
+        on_rim = _sample(rim.nonzero(), disparity, cfg.sample, g)
+        passes = _passes_sampled(coef, q, on_rim, tol, oriented, cfg)
+        score = score.masked_fill(~passes, -1)
+        best = int(torch.argmax(score))  # the first of the best: argmax returns the lowest index of ties
+        if int(score[best]) < 0:
+            return None
+        return _verified(coef[best], pts, disparity, ok, n_valid, tol, min_b, cfg, rim)
+
+    if cfg.noise_band > 0 and cfg.rule != "position":
+        # a support surface whose error is correlated over many pixels (a dense sensor's filtered
+        # map) differs little from its neighbours, so the noise reading above misses it: its band
+        # is the spread of its own pixels about it, where that spread is resolved (:func:`own_band`)
+        # and the plane so banded is the verified support
+        raw = ((_predict(coef, pts) - pts[None, :, 2].float()).abs_() < tol).sum(1)
+        raw = raw.masked_fill(~plausible, -1)
+        wide = own_band(coef[int(torch.argmax(raw))], pts, tol, cfg.noise_band, 0.5 * span)
+        if wide > tol:
+            plane = best_plane(wide)
+            if plane is not None and plane.support:
+                return plane
+    return best_plane(tol)
+
+
+#: :func:`own_band` stops when a round widens the band by less than this share (a numerical
+#: tolerance: the band converges geometrically) …
+OWN_BAND_RTOL = 0.01
+#: … or after this many rounds.
+OWN_BAND_ROUNDS = 50
+
+
+def own_band(coef: torch.Tensor, pts: torch.Tensor, tol: float, k: float, cap: float) -> float:
+    """The band of the plane ``coef`` = (a, b, c) that holds its own pixels among ``pts`` ``(N, 3)``
+    rows (x, y, d): ``k`` × their spread about it, at least ``tol``.
+
+    The plane is refitted by least squares on the pixels within the band, and the band set to ``k``
+    × the standard deviation of their residuals, corrected for the truncation at ± the band (a normal
+    error truncated at ± k σ has the standard deviation ``truncated_sd(k)`` σ); repeated while the
+    band grows. A surface whose error is a peak of width σ converges at k σ (a per-pixel error,
+    however correlated across pixels, or a smooth distortion of the map). A band that would pass the
+    object step's depth-continuity step at the median disparity of its pixels
+    (``max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC · d)``: what the method calls a depth edge)
+    or ``cap`` has found no peak but a run of surfaces (the objects on the plane, a room): ``tol``
+    is returned.
+    """
+    ratio = truncated_sd(k)
+    band = tol
+    for _ in range(OWN_BAND_ROUNDS):
+        inside = (pts[:, 2] - (coef[0] * pts[:, 0] + coef[1] * pts[:, 1] + coef[2])).abs() < band
+        if int(inside.sum()) < 3:
+            break
+        coef = _plane_fit(pts[inside])
+        r = pts[:, 2] - (coef[0] * pts[:, 0] + coef[1] * pts[:, 1] + coef[2])
+        inside = r.abs() < band
+        if int(inside.sum()) < 3:
+            break
+        wider = max(tol, k * float(r[inside].std()) / ratio)
+        step = max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC * float(pts[inside, 2].median()))
+        if wider > min(cap, step):
+            return tol
+        if wider <= band * (1.0 + OWN_BAND_RTOL):
+            break
+        band = wider
+    return band
+
+
+def truncated_sd(k: float) -> float:
+    """The standard deviation of a standard normal truncated to [−k, k] (k > 0)."""
+    phi = math.exp(-0.5 * k * k) / math.sqrt(2.0 * math.pi)
+    return math.sqrt(1.0 - 2.0 * k * phi / math.erf(k / math.sqrt(2.0)))
 
 
 def _sample(yx: torch.Tensor, disparity: torch.Tensor, n: int, g: torch.Generator) -> torch.Tensor:

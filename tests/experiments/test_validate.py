@@ -344,6 +344,37 @@ def test_quantize_junk_rounds_every_valid_disparity_to_whole_steps():
         add_junk(scene, "quantize:0")
 
 
+def test_bowl_junk_bends_every_valid_disparity_by_a_relative_error_growing_to_the_corners():
+    import torch
+
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()
+    out = add_junk(scene, "bowl:0.02")
+    gain = out.disparity / scene.disparity
+    h, w = scene.disparity.shape
+    assert abs(float(gain[0, 0]) - 1.02) < 1e-4 and abs(float(gain[h - 1, w - 1]) - 1.02) < 1e-4  # corners
+    assert float(gain[out.valid].min()) >= 0.98 - 1e-6 and float(gain[out.valid].max()) <= 1.02 + 1e-6
+    assert float(gain[h // 2, w // 2]) < 0.985  # the centre, nearly 1 − p
+    assert torch.equal(out.valid, scene.valid) and out.name == "toy+bowl:0.02"
+
+
+def test_blotch_junk_adds_noise_correlated_over_several_pixels():
+    import torch
+
+    from experiments.scenes import add_junk
+    from somtorch.tasks.ground import noise_sigma
+
+    scene = _toy_scene()
+    out = add_junk(scene, "blotch:0.5", seed=2)
+    step = (out.disparity - scene.disparity)[out.valid]
+    assert abs(float(step.std()) - 0.5) < 0.1
+    # neighbours share most of their error: the neighbour reading sees a fraction of it
+    assert noise_sigma(out.disparity - scene.disparity, out.valid) < 0.25
+    assert torch.equal(out.disparity, add_junk(scene, "blotch:0.5", seed=2).disparity)  # seeded
+    assert not bool((out.valid & ~scene.valid).any()) and out.name == "toy+blotch:0.5"
+
+
 def test_scale_junk_multiplies_every_valid_disparity_as_another_rig_would():
     import torch
 
@@ -380,10 +411,11 @@ def test_an_unknown_baseline_fails_before_any_work(tmp_path):
 def test_an_unknown_transform_fails_before_any_work(tmp_path):
     from experiments.scenes import check_junk_kind
 
-    for ok in ("flip", "pole", "resample:0.5", "noise:0.5"):
+    for ok in ("flip", "pole", "resample:0.5", "noise:0.5", "bowl:0.01", "blotch:0.5"):
         check_junk_kind(ok)
     for bad, msg in (("rotate", "unknown junk kind"), ("resample:-2", "positive factor"),
-                     ("resample:x", "positive factor"), ("noise:0", "positive standard deviation")):
+                     ("resample:x", "positive factor"), ("noise:0", "positive standard deviation"),
+                     ("bowl:-1", "positive relative error"), ("blotch:x", "positive standard deviation")):
         with pytest.raises(ValueError, match=msg):
             check_junk_kind(bad)
     proc = subprocess.run(
