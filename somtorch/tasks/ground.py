@@ -23,6 +23,12 @@ floor hides what lies beneath it); a plane verified by its share of the pixels n
 test (a table top holding most of the view has the floor beyond its edges behind it).
 ``"either"`` accepts a plane that passes one of the two (RANSAC on the lower half, as the position
 rule).
+
+The band is ``noise_band`` × the map's per-pixel noise (read by neighbour differences), at least
+``tol_px`` and ``tol_frac`` of its range. A support plane's band is also ``noise_band`` × the spread
+of its own pixels about it where that is wider and resolved (:func:`own_band`): a dense sensor
+filters its map, so its error is correlated across pixels and neighbour differences read a fraction
+of it.
 """
 
 from __future__ import annotations
