@@ -142,43 +142,41 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     plausible = good & oriented if cfg.rule == "position" else good
     if not bool(plausible.any()):
         return None
-    state = g.get_state()
+    # each hypothesis's residual at each sampled pixel in float32 (disparities of a few hundred px, a
+    # band of at least tol_px: far above its rounding); element-wise, so the same bits at any thread
+    # count; computed once for every band tried below
+    resid = (_predict(coef, pts) - pts[None, :, 2].float()).abs_()  # (I, N)
+    # the support-surface tests are constraints of the model, checked on a sample of the whole map
+    # for every hypothesis: the best plane that passes them, not the best plane, is tested on the
+    # full map (a single best hypothesis near a test's threshold made the verdict a lottery of the
+    # RANSAC seed)
+    q = _sample(ok.nonzero(), disparity, cfg.sample, g)
+    rim = view_rim(ok)
+    on_rim = _sample(rim.nonzero(), disparity, cfg.sample, g)
 
-    def best_plane(tol: float) -> GroundPlane | None:
-        """The best hypothesis that passes the tests with band ``tol``, verified (the same draws of
-        ``g`` for every band)."""
-        g.set_state(state)
-        # inlier counts of every hypothesis in float32 (disparities of a few hundred px, a band of
-        # at least tol_px: far above its rounding); element-wise, so the same bits at any thread count
-        score = (_predict(coef, pts) - pts[None, :, 2].float()).abs_() < tol
-        score = score.sum(1).masked_fill(~plausible, -1)
-        # the support-surface tests are constraints of the model, checked on a sample of the whole
-        # map for every hypothesis: the best plane that passes them, not the best plane, is tested on
-        # the full map (a single best hypothesis near a test's threshold made the verdict a lottery
-        # of the RANSAC seed)
-        q = _sample(ok.nonzero(), disparity, cfg.sample, g)
-        rim = view_rim(ok)
-        on_rim = _sample(rim.nonzero(), disparity, cfg.sample, g)
-        passes = _passes_sampled(coef, q, on_rim, tol, oriented, cfg)
-        score = score.masked_fill(~passes, -1)
+    def inliers(band: float) -> torch.Tensor:
+        return (resid < band).sum(1).masked_fill(~plausible, -1)
+
+    def best_plane(band: float, score: torch.Tensor) -> GroundPlane | None:
+        """The best hypothesis by ``score`` (its inliers within ``band``) that passes the tests, verified."""
+        score = score.masked_fill(~_passes_sampled(coef, q, on_rim, band, oriented, cfg), -1)
         best = int(torch.argmax(score))  # the first of the best: argmax returns the lowest index of ties
         if int(score[best]) < 0:
             return None
-        return _verified(coef[best], pts, disparity, ok, n_valid, tol, min_b, cfg, rim)
+        return _verified(coef[best], pts, disparity, ok, n_valid, band, min_b, cfg, rim)
 
+    counts = inliers(tol)
     if cfg.noise_band > 0 and cfg.rule != "position":
         # a support surface whose error is correlated over many pixels (a dense sensor's filtered
         # map) differs little from its neighbours, so the noise reading above misses it: its band
         # is the spread of its own pixels about it, where that spread is resolved (:func:`own_band`)
         # and the plane so banded is the verified support
-        raw = ((_predict(coef, pts) - pts[None, :, 2].float()).abs_() < tol).sum(1)
-        raw = raw.masked_fill(~plausible, -1)
-        wide = own_band(coef[int(torch.argmax(raw))], pts, tol, cfg.noise_band, 0.5 * span)
+        wide = own_band(coef[int(torch.argmax(counts))], pts, tol, cfg.noise_band, 0.5 * span)
         if wide > tol:
-            plane = best_plane(wide)
+            plane = best_plane(wide, inliers(wide))
             if plane is not None and plane.support:
                 return plane
-    return best_plane(tol)
+    return best_plane(tol, counts)
 
 
 #: :func:`own_band` stops when a round widens the band by less than this share (a numerical
