@@ -55,7 +55,7 @@ def _load(spec: Any, data_dir: Path) -> Any:
 
 
 JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S", "quantize:Q", "scale:F", "bowl:P",
-              "blotch:S")
+              "blotch:S", "smear:S", "relief:F", "wide:F")
 #: ``blotch:S``: the correlation length of its noise, as a share of the image's shorter side.
 BLOTCH_SCALE = 0.02
 
@@ -68,10 +68,14 @@ def check_junk_kind(kind: str) -> None:
                                   ("quantize:", "a positive step in px", "quantize:1"),
                                   ("scale:", "a positive factor", "scale:0.5"),
                                   ("bowl:", "a positive relative error", "bowl:0.01"),
-                                  ("blotch:", "a positive standard deviation in px", "blotch:0.5")):
+                                  ("blotch:", "a positive standard deviation in px", "blotch:0.5"),
+                                  ("smear:", "a positive blur radius in px", "smear:2"),
+                                  ("relief:", "a positive factor", "relief:0.5"),
+                                  ("wide:", "a factor in (0, 1]", "wide:0.5")):
         if kind.startswith(prefix):
             try:
-                ok = float(kind.split(":", 1)[1]) > 0
+                v = float(kind.split(":", 1)[1])
+                ok = v > 0 and (v <= 1 or prefix != "wide:")
             except ValueError:
                 ok = False
             if ok:
@@ -134,6 +138,63 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
         keep = scene.valid & (noisy > 0)
         return dataclasses.replace(scene, disparity=torch.where(keep, noisy, scene.disparity), valid=keep,
                                    name=f"{scene.name}+{kind}")
+    if kind.startswith("wide:"):  # a lens F × as long from the same place, f·B kept: the view shrinks to
+        # its centre and the floor around it comes into view (the background's plane, continued)
+        f = float(kind.split(":", 1)[1])
+        h, w = scene.disparity.shape
+        nw, nh = max(8, round(w * f)), max(8, round(h * f))
+        small = resize_scene(scene, nw, nh)
+        y0, x0 = (h - nh) // 2, (w - nw) // 2
+        d_small = small.disparity * (w / nw)  # resize_scene scales disparities with the width: undone
+        bg = small.valid if small.objects is None else small.valid & (small.objects == 0)
+        ys, xs = bg.nonzero(as_tuple=True)
+        a_ = torch.stack([xs.double() + x0, ys.double() + y0, torch.ones(xs.numel(), dtype=torch.float64)], 1)
+        coef = torch.linalg.lstsq(a_, d_small[bg].double()[:, None]).solution[:, 0]
+        yy, xx = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64),
+                                indexing="ij")
+        disparity = (coef[0] * xx + coef[1] * yy + coef[2]).to(scene.disparity.dtype)
+        valid = disparity > 0
+        disparity[y0:y0 + nh, x0:x0 + nw] = d_small
+        valid[y0:y0 + nh, x0:x0 + nw] = small.valid
+        disparity = torch.where(valid, disparity, 0.0)
+        objects = image = None
+        if small.objects is not None:
+            objects = torch.zeros(h, w, dtype=small.objects.dtype)
+            objects[y0:y0 + nh, x0:x0 + nw] = small.objects
+        if small.image is not None:
+            image = torch.full((3, h, w), 128, dtype=small.image.dtype)
+            image[:, y0:y0 + nh, x0:x0 + nw] = small.image
+        return dataclasses.replace(small, disparity=disparity, valid=valid, objects=objects, image=image,
+                                   camera=None, name=f"{scene.name}+{kind}")
+    if kind.startswith("relief:"):  # the world F × as deep about its mean plane: planes stay planes
+        f = float(kind.split(":", 1)[1])
+        h, w = scene.disparity.shape
+        yy, xx = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64),
+                                indexing="ij")
+        v = scene.valid
+        a_ = torch.stack([xx[v], yy[v], torch.ones_like(xx[v])], 1)
+        coef = torch.linalg.lstsq(a_, scene.disparity[v].double()[:, None]).solution[:, 0]
+        mean_plane = coef[0] * xx + coef[1] * yy + coef[2]  # (x, y, d) ↦ (x, y, (1 − F)·plane + F·d): affine
+        flat = (1.0 - f) * mean_plane + f * scene.disparity.double()
+        keep = scene.valid & (flat > 0)
+        flat = torch.where(keep, flat.to(scene.disparity.dtype), scene.disparity)
+        return dataclasses.replace(scene, disparity=flat, valid=keep, name=f"{scene.name}+{kind}")
+    if kind.startswith("smear:"):  # a filtered or learned dense map: depth edges bleed into ramps
+        import torch.nn.functional as F
+
+        s = float(kind.split(":", 1)[1])
+        r = max(1, int(3 * s))
+        k = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=torch.float64) / s) ** 2)
+        k = (k / k.sum()).float()
+
+        def blur(a: torch.Tensor) -> torch.Tensor:  # a separable Gaussian, zero outside the image
+            a = F.pad(a[None, None].float(), (r, r, r, r))
+            return F.conv2d(F.conv2d(a, k.view(1, 1, -1, 1)), k.view(1, 1, 1, -1))[0, 0]
+
+        wsum = blur(scene.valid)  # normalised: invalid pixels neither pull a value nor receive one
+        mixed = blur(torch.where(scene.valid, scene.disparity, 0.0)) / wsum.clamp_min(1e-6)
+        mixed = torch.where(scene.valid, mixed.to(scene.disparity.dtype), scene.disparity)
+        return dataclasses.replace(scene, disparity=mixed, name=f"{scene.name}+{kind}")
     if kind.startswith("quantize:"):  # a sensor that reports whole steps (integer or 8-bit disparity)
         q = float(kind.split(":", 1)[1])
         rounded = torch.round(scene.disparity / q) * q

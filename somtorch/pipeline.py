@@ -255,7 +255,8 @@ def on_support(scene: Scene, ground: GroundPlane | None,
         return scene, ground
     h, w = scene.disparity.shape
     height = relative_disparity(scene.disparity, ground.disparity(h, w))
-    level = replace(ground, a=0.0, b=0.0, c=0.0)  # its own disparity cache (a field outside init)
+    # at height 0 (its own disparity cache: a field outside init)
+    level = replace(ground, a=0.0, b=0.0, c=0.0, bend=(0.0, 0.0, 0.0))
     return replace(scene, disparity=height), level
 
 
@@ -372,6 +373,7 @@ def _strided(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg
     if s == 1:
         return scene.disparity, scene.valid, labels, ground, cfg
     g = None if ground is None else replace(ground, a=ground.a * s, b=ground.b * s,
+                                            bend=tuple(v * s * s for v in ground.bend),
                                             mask=ground.mask[::s, ::s].contiguous())
     return (scene.disparity[::s, ::s].contiguous(), scene.valid[::s, ::s].contiguous(),
             labels[:, ::s, ::s].contiguous(), g, cfg)

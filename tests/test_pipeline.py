@@ -410,6 +410,27 @@ def test_object_step_on_a_strided_map_keeps_full_size_boxes(motorcycle):
         assert b.kept[0].pixels % 4 == 0  # sampled pixels counted at full size
 
 
+def test_a_bent_support_is_re_expressed_on_the_strided_map():
+    """The object step reads every 2nd pixel: the plane's slopes scale by 2, its bend by 4, so that
+    the strided map's surface is the full map's at the sampled pixels."""
+    from dataclasses import replace
+
+    from somtorch.disparity.scene import scene_from_arrays
+    from somtorch.pipeline import _strided
+    from somtorch.tasks.ground import GroundPlane
+    from somtorch.tasks.objects import AreaConfig
+
+    h, w = 60, 80
+    g = GroundPlane(0.01, 0.05, 30.0, 0.5, torch.ones(h, w, dtype=torch.bool), 1.0, True, 1.0, (2e-4, -1e-4, 3e-4))
+    scene = scene_from_arrays(g.disparity(h, w).clone(), name="bent")
+    labels = torch.zeros(1, h, w, dtype=torch.long)
+    _, _, _, g2, _ = _strided(scene, labels, g, AreaConfig(map_stride=2))
+    assert torch.allclose(g2.disparity(h // 2, w // 2), g.disparity(h, w)[::2, ::2], atol=1e-4)
+    assert g2.mask.shape == (h // 2, w // 2)
+    flat = replace(g, bend=(0.0, 0.0, 0.0))
+    assert not torch.allclose(flat.disparity(h, w), g.disparity(h, w), atol=0.1)  # the bend is read
+
+
 def test_the_paper_preset_reads_every_pixel():
     from experiments.distributed import compose_config
 

@@ -28,7 +28,12 @@ The band is ``noise_band`` × the map's per-pixel noise (read by neighbour diffe
 ``tol_px`` and ``tol_frac`` of its range. A support plane's band is also ``noise_band`` × the spread
 of its own pixels about it where that is wider and resolved (:func:`own_band`): a dense sensor
 filters its map, so its error is correlated across pixels and neighbour differences read a fraction
-of it.
+of it. Where no plane passes, a **bent** surface may (:func:`own_surface`): a dense sensor's
+calibration residue bends its floor by a fraction of a pixel towards the corners, so a plane's band
+misses the floor's rim and the support test fails. The quadratic surface is fitted by the same
+rounds as the own band; it is taken only where it departs from the plane nearest its pixels by less
+than a depth edge (the object step's continuity step) and passes the support test, and it is
+reported as :attr:`GroundPlane.bend`.
 """
 
 from __future__ import annotations
@@ -48,7 +53,9 @@ from ..validation import check_tensor
 class GroundPlane:
     """A fitted ground plane ``d = a·x + b·y + c`` and its inlier mask ``(H, W)``; ``support``: the
     support test verified it (rules ``"support"`` and ``"either"``), not only the position test;
-    ``rim_frac``: the share of the view's rim (:func:`view_rim`) in its band (None: not measured)."""
+    ``rim_frac``: the share of the view's rim (:func:`view_rim`) in its band (None: not measured);
+    ``bend``: ``(e, f, g)`` of a bent support ``d = a·x + b·y + c + e·x² + f·x·y + g·y²``
+    (:func:`own_surface`; zeros for a plane)."""
 
     a: float
     b: float
@@ -58,24 +65,23 @@ class GroundPlane:
     inlier_frac: float
     support: bool = False
     rim_frac: float | None = None
+    bend: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def disparity(self, h: int, w: int) -> torch.Tensor:
-        """The plane's disparity at every pixel ``(H, W)`` (computed once per size; do not modify it)."""
-        key = (h, w, self.a, self.b, self.c)
+        """The surface's disparity at every pixel ``(H, W)`` (computed once per size; do not modify it)."""
+        key = (h, w, self.a, self.b, self.c, self.bend)
         if key not in self._cache:
-            ys = torch.arange(h, dtype=torch.float64)[:, None]
-            xs = torch.arange(w, dtype=torch.float64)[None, :]
             self._cache.clear()
-            self._cache[key] = (self.a * xs + self.b * ys + self.c).float()
+            self._cache[key] = _surface((self.a, self.b, self.c, *self.bend), h, w).float()
         return self._cache[key]
 
     def as_dict(self) -> dict:
         """The plane's coefficients, tolerance, inlier share, share of the view's rim and support
         flag as a dict (for ``metrics.json``)."""
         return {"a": self.a, "b": self.b, "c": self.c, "tol": self.tol, "inlier_frac": self.inlier_frac,
-                "rim_frac": self.rim_frac, "support": self.support}
+                "rim_frac": self.rim_frac, "support": self.support, "bend": list(self.bend)}
 
 
 def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundConfig | None = None, *,
@@ -176,7 +182,71 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
             plane = best_plane(wide, inliers(wide))
             if plane is not None and plane.support:
                 return plane
-    return best_plane(tol, counts)
+    plane = best_plane(tol, counts)
+    if plane is None and cfg.noise_band > 0 and cfg.rule != "position":
+        # no plane passes: a dense sensor's calibration residue bends its floor by a fraction of a
+        # pixel, and a plane's band then misses the floor's rim (:func:`own_surface`)
+        bent = own_surface(coef[int(torch.argmax(counts))], pts, tol, cfg.noise_band, 0.5 * span, h, w)
+        if bent is not None:
+            plane = verify_plane(tuple(float(v) for v in bent[1]), disparity, ok, bent[0], cfg, min_b=min_b,
+                                 n_valid=n_valid, rim=rim)
+            if plane is not None and not plane.support:  # a bent surface is a support or nothing
+                plane = None
+    return plane
+
+
+def own_surface(coef: torch.Tensor, pts: torch.Tensor, tol: float, k: float, cap: float, h: int,
+                w: int) -> tuple[float, torch.Tensor] | None:
+    """The bent surface ``d = a·x + b·y + c + e·x² + f·x·y + g·y²`` that holds the pixels of the plane
+    ``coef`` = (a, b, c) among ``pts`` ``(N, 3)`` rows (x, y, d) of an ``(h, w)`` map, and its band:
+    ``(band, (a, b, c, e, f, g))``, or None.
+
+    The rounds of :func:`own_band`, with the quadratic surface refitted on the pixels within the band
+    in place of the plane. None where the band would pass the depth-continuity step or ``cap`` (no
+    peak: a run of surfaces), or where the surface departs from the plane nearest its pixels by more
+    than the continuity step at their median disparity: a floor bent by its sensor's calibration
+    departs by a fraction of a pixel, a dome or a ramp of steps by a depth edge.
+    """
+    coef = torch.cat([coef.double(), torch.zeros(3, dtype=torch.float64)])
+    band, coef, end = _own_rounds(coef, pts, tol, k, cap, lambda p: _surface_fit(p, h, w), 6)
+    if end != "peak":
+        return None
+    inside = (pts[:, 2] - _surface_at(coef, pts[:, 0], pts[:, 1])).abs() < band
+    if int(inside.sum()) < 6:
+        return None
+    x, y = pts[inside, 0], pts[inside, 1]
+    bend = (_surface_at(coef, x, y) - _surface_at(_plane_fit(pts[inside]), x, y)).abs()
+    step = max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC * float(pts[inside, 2].median()))
+    return None if float(bend.max()) > step else (band, coef)
+
+
+def _surface_at(coef: torch.Tensor, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """``d = a·x + b·y + c + e·x² + f·x·y + g·y²`` at ``x``, ``y`` (float64); ``coef`` = (a, b, c) or
+    (a, b, c, e, f, g)."""
+    x, y = x.double(), y.double()
+    d = coef[0] * x + coef[1] * y + coef[2]
+    if len(coef) > 3:
+        d = d + coef[3] * x * x + coef[4] * x * y + coef[5] * y * y
+    return d
+
+
+def _surface(coef, h: int, w: int) -> torch.Tensor:
+    """The surface ``coef`` (:func:`_surface_at`) at every pixel of an ``(H, W)`` map, float64."""
+    ys = torch.arange(h, dtype=torch.float64)[:, None]
+    xs = torch.arange(w, dtype=torch.float64)[None, :]
+    coef = tuple(coef) if any(coef[3:]) else tuple(coef[:3])  # a plane: no quadratic terms to add
+    return _surface_at(torch.tensor(coef, dtype=torch.float64), xs, ys)
+
+
+def _surface_fit(pts: torch.Tensor, h: int, w: int) -> torch.Tensor:
+    """Least-squares (a, b, c, e, f, g) of :func:`_surface_at` through ``pts`` ``(N, 3)`` rows (x, y, d),
+    from element-wise float64 sums in coordinates scaled to the map (x / w, y / h)."""
+    u, v, d = pts[:, 0].double() / w, pts[:, 1].double() / h, pts[:, 2].double()
+    cols = (u, v, torch.ones_like(u), u * u, u * v, v * v)
+    ata = torch.tensor([[float((p * q).sum()) for q in cols] for p in cols], dtype=torch.float64)
+    atb = torch.tensor([float((p * d).sum()) for p in cols], dtype=torch.float64)
+    beta = torch.linalg.solve(ata, atb)
+    return beta / torch.tensor([w, h, 1.0, w * w, w * h, h * h], dtype=torch.float64)
 
 
 #: :func:`own_band` stops when a round widens the band by less than this share (a numerical
@@ -200,25 +270,35 @@ def own_band(coef: torch.Tensor, pts: torch.Tensor, tol: float, k: float, cap: f
     or ``cap`` has found no peak but a run of surfaces (the objects on the plane, a room): ``tol``
     is returned.
     """
+    band, _, end = _own_rounds(coef, pts, tol, k, cap, _plane_fit, 3)
+    return tol if end == "run" else band
+
+
+def _own_rounds(coef: torch.Tensor, pts: torch.Tensor, tol: float, k: float, cap: float, fit,
+                n_min: int) -> tuple[float, torch.Tensor, str]:
+    """The rounds of :func:`own_band` and :func:`own_surface` from the surface ``coef``
+    (:func:`_surface_at`), refitted by ``fit`` on the pixels of ``pts`` within the band: (band, its
+    surface, how it ended: ``"peak"`` converged, ``"run"`` past the continuity step or ``cap``,
+    ``"few"`` under ``n_min`` pixels in the band)."""
     ratio = truncated_sd(k)
     band = tol
     for _ in range(OWN_BAND_ROUNDS):
-        inside = (pts[:, 2] - (coef[0] * pts[:, 0] + coef[1] * pts[:, 1] + coef[2])).abs() < band
-        if int(inside.sum()) < 3:
-            break
-        coef = _plane_fit(pts[inside])
-        r = pts[:, 2] - (coef[0] * pts[:, 0] + coef[1] * pts[:, 1] + coef[2])
+        inside = (pts[:, 2] - _surface_at(coef, pts[:, 0], pts[:, 1])).abs() < band
+        if int(inside.sum()) < n_min:
+            return band, coef, "few"
+        coef = fit(pts[inside])
+        r = pts[:, 2] - _surface_at(coef, pts[:, 0], pts[:, 1])
         inside = r.abs() < band
-        if int(inside.sum()) < 3:
-            break
+        if int(inside.sum()) < n_min:
+            return band, coef, "few"
         wider = max(tol, k * float(r[inside].std()) / ratio)
         step = max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC * float(pts[inside, 2].median()))
         if wider > min(cap, step):
-            return tol
+            return band, coef, "run"
         if wider <= band * (1.0 + OWN_BAND_RTOL):
             break
         band = wider
-    return band
+    return band, coef, "peak"
 
 
 def truncated_sd(k: float) -> float:
@@ -330,13 +410,13 @@ def _verified(best: torch.Tensor, pts: torch.Tensor, disparity: torch.Tensor, ok
                         rim=rim)
 
 
-def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: torch.Tensor, tol: float,
+def verify_plane(coef: tuple[float, ...], disparity: torch.Tensor, ok: torch.Tensor, tol: float,
                  cfg: GroundConfig, *, min_b: float = 0.0, n_valid: int | None = None,
                  rim: torch.Tensor | None = None) -> GroundPlane | None:
-    """The plane ``d = a·x + b·y + c`` (``coef`` = (a, b, c)) with band ``tol`` px as a
-    :class:`GroundPlane` if it passes the tests of ``cfg.rule`` on the map (see the module
-    docstring; ``min_b``: the position rule's least ``b``; ``rim``: :func:`view_rim` of ``ok``
-    where the caller has it), else None.
+    """The plane ``d = a·x + b·y + c`` (``coef`` = (a, b, c); a bent surface: (a, b, c, e, f, g),
+    :func:`own_surface`) with band ``tol`` px as a :class:`GroundPlane` if it passes the tests of
+    ``cfg.rule`` on the map (see the module docstring; ``min_b``: the position rule's least ``b``;
+    ``rim``: :func:`view_rim` of ``ok`` where the caller has it), else None.
 
     Shape:
         ``disparity``, ``ok`` (valid, finite pixels), ``rim`` ``(H, W)``.
@@ -346,13 +426,12 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
         check_tensor("ok", ok, ndim=2, dtype=torch.bool)
         n_valid = max(int(ok.sum()), 1)
     h, w = disparity.shape
-    a, b, c = coef
+    a, b, c = coef[:3]
+    bend = tuple(coef[3:]) if len(coef) > 3 else (0.0, 0.0, 0.0)
     position = b >= min_b and abs(a) <= b * w / h
     if cfg.rule == "position" and not position:
         return None
-    ys = torch.arange(h, dtype=torch.float64)[:, None]
-    xs = torch.arange(w, dtype=torch.float64)[None, :]
-    plane = a * xs + b * ys + c
+    plane = _surface((a, b, c, *bend), h, w)
     d = disparity.double()
     mask = ok & ((plane - d).abs() < tol)
     frac = int(mask.sum()) / n_valid
@@ -367,7 +446,7 @@ def verify_plane(coef: tuple[float, float, float], disparity: torch.Tensor, ok: 
     support = cfg.rule != "position" and (frac >= cfg.support_frac or surrounds)
     if not _either(cfg.rule, position, support):
         return None
-    return GroundPlane(a, b, c, tol, mask, frac, support, rim_frac)
+    return GroundPlane(a, b, c, tol, mask, frac, support, rim_frac, bend)
 
 
 def rim_share(mask: torch.Tensor, rim: torch.Tensor) -> float:

@@ -375,6 +375,69 @@ def test_blotch_junk_adds_noise_correlated_over_several_pixels():
     assert not bool((out.valid & ~scene.valid).any()) and out.name == "toy+blotch:0.5"
 
 
+def test_smear_junk_bleeds_depth_edges_into_ramps_and_leaves_surfaces_alone():
+    import dataclasses
+
+    import torch
+
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()
+    hole = torch.zeros_like(scene.valid)
+    hole[5:10, 5:10] = True  # no measurement there: it must neither pull nor receive a value
+    scene = dataclasses.replace(scene, disparity=torch.where(hole, 0.0, scene.disparity), valid=scene.valid & ~hole)
+    out = add_junk(scene, "smear:2")
+    assert 10.5 < float(out.disparity[35, 29]) < 19.5 and 10.5 < float(out.disparity[35, 30]) < 19.5  # the edge
+    assert abs(float(out.disparity[35, 10]) - 10.0) < 1e-4  # a flat surface stays flat ...
+    assert abs(float(out.disparity[35, 50]) - 22.0) < 1e-3  # ... and a slanted one slanted
+    assert abs(float(out.disparity[7, 11]) - 10.0) < 1e-4  # beside the hole: not pulled towards its 0
+    assert torch.equal(out.valid, scene.valid) and float(out.disparity[7, 7]) == 0.0
+    assert out.name == "toy+smear:2"
+    with pytest.raises(ValueError, match="positive blur radius"):
+        add_junk(scene, "smear:0")
+
+
+def test_relief_junk_flattens_the_world_towards_its_mean_plane_keeping_planes_planar():
+    import torch
+
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()
+    out = add_junk(scene, "relief:0.5")
+    h, w = scene.disparity.shape
+    yy, xx = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
+    rest = (out.disparity.double() - 0.5 * scene.disparity.double()).flatten()  # half the mean plane
+    a = torch.stack([xx.flatten(), yy.flatten(), torch.ones(h * w, dtype=torch.float64)], 1)
+    fit = torch.linalg.lstsq(a, rest[:, None]).solution
+    assert float((a @ fit - rest[:, None]).abs().max()) < 1e-3  # an affine map of (x, y, d): planes stay planes
+    step = float(out.disparity[35, 40] - out.disparity[35, 20])
+    assert abs(step - 0.5 * float(scene.disparity[35, 40] - scene.disparity[35, 20])) < 0.1  # half as deep
+    assert torch.equal(out.valid, scene.valid) and out.name == "toy+relief:0.5"
+    with pytest.raises(ValueError, match="positive factor"):
+        add_junk(scene, "relief:0")
+
+
+def test_wide_junk_shrinks_the_view_into_its_centre_and_continues_the_floor_around_it():
+    import torch
+
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()  # a flat background at 10 px, an object 20 … 23.9 px at rows 20–49, cols 30–69
+    out = add_junk(scene, "wide:0.5")
+    h, w = scene.disparity.shape
+    assert out.disparity.shape == (h, w) and bool(out.valid.all()) and out.camera is None
+    assert abs(float(out.disparity[0, 0]) - 10.0) < 1e-3 and abs(float(out.disparity[h - 1, w - 1]) - 10.0) < 1e-3
+    obj = out.objects == 1
+    ys, xs = obj.nonzero(as_tuple=True)
+    assert (int(ys.min()), int(ys.max()), int(xs.min()), int(xs.max())) == (25, 39, 40, 59)  # half size, centred
+    assert float(out.disparity[obj].min()) >= 20.0 - 1e-4 and float(out.disparity[obj].max()) <= 23.9 + 1e-4  # f·B kept
+    assert int((out.objects == 0).sum()) == h * w - int(obj.sum()) and out.name == "toy+wide:0.5"
+    assert out.image is not None and out.image.shape == scene.image.shape
+    for bad in ("wide:0", "wide:1.5"):
+        with pytest.raises(ValueError, match=r"factor in \(0, 1\]"):
+            add_junk(scene, bad)
+
+
 def test_scale_junk_multiplies_every_valid_disparity_as_another_rig_would():
     import torch
 
@@ -411,7 +474,8 @@ def test_an_unknown_baseline_fails_before_any_work(tmp_path):
 def test_an_unknown_transform_fails_before_any_work(tmp_path):
     from experiments.scenes import check_junk_kind
 
-    for ok in ("flip", "pole", "resample:0.5", "noise:0.5", "bowl:0.01", "blotch:0.5"):
+    for ok in ("flip", "pole", "resample:0.5", "noise:0.5", "bowl:0.01", "blotch:0.5", "smear:2", "relief:0.5",
+               "wide:0.5"):
         check_junk_kind(ok)
     for bad, msg in (("rotate", "unknown junk kind"), ("resample:-2", "positive factor"),
                      ("resample:x", "positive factor"), ("noise:0", "positive standard deviation"),

@@ -262,3 +262,61 @@ def test_a_band_that_finds_no_peak_is_not_widened():
     dome = torch.stack([x, y, flat + 8.0 * ((x / 160 - 1) ** 2 + (y / 120 - 1) ** 2)], 1)
     assert own_band(coef, dome, 0.5, 2.0, 100.0) == 0.5
     assert own_band(coef, noisy, 0.5, 2.0, 1.0) == 0.5  # the map's range caps it too
+
+
+def _bowl_floor(p: float, box: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+    """A floor seen from above (50 px, nearer towards the bottom) with a parcel on it, every disparity
+    × (1 + p (x̂² + ŷ² − 1)): a dense sensor's calibration residue, −p at the centre, +p at the corners."""
+    h, w = 240, 320
+    ys = torch.linspace(-1, 1, h)[:, None]
+    xs = torch.linspace(-1, 1, w)[None, :]
+    d = (50.0 + 0.02 * torch.arange(h, dtype=torch.float32)[:, None]).expand(h, w)
+    parcel = torch.zeros(h, w, dtype=torch.bool)
+    if box:
+        parcel[60:180, 90:230] = True
+    return torch.where(parcel, d + 8.0, d) * (1 + p * (xs * xs + ys * ys - 1)), parcel
+
+
+def test_a_floor_bent_by_a_calibration_residue_is_cut_by_its_own_bent_surface():
+    """±0.75 px of bend: no plane holds 60 % of the pixels or of the rim, so before session 22 no
+    support was found and the contrast rule ran; the bent surface holds the whole floor and no
+    pixel of the parcel. A flat floor keeps its plane (no bend)."""
+    from somtorch.tasks.ground import verify_plane
+
+    d, parcel = _bowl_floor(0.015)
+    h, w = d.shape
+    valid = torch.ones(h, w, dtype=torch.bool)
+    g = fit_ground_plane(d, valid)
+    assert g is not None and g.support and g.bend != (0.0, 0.0, 0.0)
+    assert float(g.mask[~parcel].float().mean()) > 0.99 and not bool(g.mask[parcel].any())
+    assert float((d - g.disparity(h, w)).abs()[~parcel].max()) < g.tol  # it reports the surface it cut
+    flat = verify_plane((g.a, g.b, g.c), d, valid, g.tol, GroundConfig())
+    assert flat is None or not flat.support  # its plane part alone is no verified support
+    assert g.as_dict()["bend"] == list(g.bend)  # reported in metrics.json
+    level, _ = _bowl_floor(0.0)
+    assert fit_ground_plane(level, valid).bend == (0.0, 0.0, 0.0)
+
+
+def test_a_dome_is_no_bent_floor():
+    """A surface that departs from its nearest plane by more than a depth edge (the object step's
+    continuity step) is a thing, not a bent floor: a dome filling the view is never a support, while
+    a sub-pixel bowl is fitted at the band it started with."""
+    from somtorch.tasks.ground import own_surface
+
+    g = torch.Generator().manual_seed(3)
+    n = 20_000
+    x = 320 * torch.rand(n, generator=g, dtype=torch.float64)
+    y = 240 * torch.rand(n, generator=g, dtype=torch.float64)
+    coef = torch.tensor([0.0, 0.02, 50.0], dtype=torch.float64)
+    flat = coef[1] * y + coef[2]
+    bowl = torch.stack([x, y, flat * (1 + 0.01 * ((x / 160 - 1) ** 2 + (y / 120 - 1) ** 2 - 1))], 1)
+    band, bent = own_surface(coef, bowl, 0.5, 2.0, 100.0, 240, 320)
+    assert band == 0.5 and float(bent[3:].abs().max()) > 0
+    dome = torch.stack([x, y, flat + 8.0 * (1 - (x / 160 - 1) ** 2 - (y / 120 - 1) ** 2)], 1)
+    assert own_surface(coef, dome, 0.5, 2.0, 100.0, 240, 320) is None
+    h, w = 240, 320
+    yy = torch.arange(h, dtype=torch.float32)[:, None] / 120 - 1
+    xx = torch.arange(w, dtype=torch.float32)[None, :] / 160 - 1
+    ball = (50.0 + 8.0 * (1 - xx * xx - yy * yy)).expand(h, w).contiguous()
+    found = fit_ground_plane(ball, torch.ones(h, w, dtype=torch.bool))
+    assert found is None or not found.support
