@@ -70,8 +70,8 @@ class ValidateConfig(RunConfig):
         loss_margin: the largest drop of one dataset's hit rate a change may cost.
         ni_margin: non-inferiority margin of a removal (and of the all-objects reading).
         transforms: robustness checks: every frame transformed (``flip``, ``resample:F``, ``noise:S``,
-            ``quantize:Q``, ``scale:F``, ``bowl:P``, ``blotch:S``, ``smear:S``, ``relief:F``, ``pole``,
-            ``border``, ``specks``;
+            ``quantize:Q``, ``scale:F``, ``bowl:P``, ``blotch:S``, ``smear:S``, ``relief:F``, ``wide:F``,
+            ``pole``, ``border``, ``specks``;
             experiments.scenes.add_junk) and scored with the defaults.
         baselines: task baselines (somtorch.tasks.baselines) scored beside the defaults, one run per frame.
     """
