@@ -28,12 +28,12 @@ The band is ``noise_band`` × the map's per-pixel noise (read by neighbour diffe
 ``tol_px`` and ``tol_frac`` of its range. A support plane's band is also ``noise_band`` × the spread
 of its own pixels about it where that is wider and resolved (:func:`own_band`): a dense sensor
 filters its map, so its error is correlated across pixels and neighbour differences read a fraction
-of it. Where no plane passes, a **bent** surface may (:func:`own_surface`): a dense sensor's
-calibration residue bends its floor by a fraction of a pixel towards the corners, so a plane's band
-misses the floor's rim and the support test fails. The quadratic surface is fitted by the same
-rounds as the own band; it is taken only where it departs from the plane nearest its pixels by less
-than a depth edge (the object step's continuity step) and passes the support test, and it is
-reported as :attr:`GroundPlane.bend`.
+of it. A dense sensor's calibration residue bends its floor by a fraction of a pixel towards the
+corners, so a plane's band misses the floor's rim: the support may be a **bent** surface
+(:func:`own_surface`), fitted by the same rounds as the own band, refused where it departs from the
+plane nearest its pixels by more than a depth edge (the object step's continuity step), and taken
+where it passes a support test no plane passes (any, where none passes; the rim test, where the
+plane passed by its share of the pixels alone). It is reported as :attr:`GroundPlane.bend`.
 """
 
 from __future__ import annotations
@@ -183,15 +183,19 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
             if plane is not None and plane.support:
                 return plane
     plane = best_plane(tol, counts)
-    if plane is None and cfg.noise_band > 0 and cfg.rule != "position":
-        # no plane passes: a dense sensor's calibration residue bends its floor by a fraction of a
-        # pixel, and a plane's band then misses the floor's rim (:func:`own_surface`)
+    short_rim = plane is not None and plane.support and plane.rim_frac < cfg.support_frac
+    if (plane is None or short_rim) and cfg.noise_band > 0 and cfg.rule != "position":
+        # no plane passes, or one passes by its share of the pixels but misses the view's rim: a dense
+        # sensor's calibration residue bends its floor by a fraction of a pixel, and a plane's band
+        # then misses the floor's rim (:func:`own_surface`). The bent surface is taken where it
+        # passes a support test that the plane does not: any, or the rim's
         bent = own_surface(coef[int(torch.argmax(counts))], pts, tol, cfg.noise_band, 0.5 * span, h, w)
         if bent is not None:
-            plane = verify_plane(tuple(float(v) for v in bent[1]), disparity, ok, bent[0], cfg, min_b=min_b,
-                                 n_valid=n_valid, rim=rim)
-            if plane is not None and not plane.support:  # a bent surface is a support or nothing
-                plane = None
+            curved = verify_plane(tuple(float(v) for v in bent[1]), disparity, ok, bent[0], cfg, min_b=min_b,
+                                  n_valid=n_valid, rim=rim)
+            passes = curved is not None and curved.support
+            if passes and (plane is None or curved.rim_frac >= cfg.support_frac):
+                return curved
     return plane
 
 
