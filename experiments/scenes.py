@@ -147,6 +147,8 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
         y0, x0 = (h - nh) // 2, (w - nw) // 2
         d_small = small.disparity * (w / nw)  # resize_scene scales disparities with the width: undone
         bg = small.valid if small.objects is None else small.valid & (small.objects == 0)
+        if int(bg.sum()) < 3:  # an object filling the view: the plane of the whole map
+            bg = small.valid
         ys, xs = bg.nonzero(as_tuple=True)
         a_ = torch.stack([xs.double() + x0, ys.double() + y0, torch.ones(xs.numel(), dtype=torch.float64)], 1)
         coef = torch.linalg.lstsq(a_, d_small[bg].double()[:, None]).solution[:, 0]

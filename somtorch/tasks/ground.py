@@ -212,14 +212,18 @@ def own_surface(coef: torch.Tensor, pts: torch.Tensor, tol: float, k: float, cap
     departs by a fraction of a pixel, a dome or a ramp of steps by a depth edge.
     """
     coef = torch.cat([coef.double(), torch.zeros(3, dtype=torch.float64)])
-    band, coef, end = _own_rounds(coef, pts, tol, k, cap, lambda p: _surface_fit(p, h, w), 6)
-    if end != "peak":
-        return None
-    inside = (pts[:, 2] - _surface_at(coef, pts[:, 0], pts[:, 1])).abs() < band
-    if int(inside.sum()) < 6:
+    try:
+        band, coef, end = _own_rounds(coef, pts, tol, k, cap, lambda p: _surface_fit(p, h, w), 6)
+        if end != "peak":
+            return None
+        inside = (pts[:, 2] - _surface_at(coef, pts[:, 0], pts[:, 1])).abs() < band
+        if int(inside.sum()) < 6:
+            return None
+        flat = _plane_fit(pts[inside])
+    except torch.linalg.LinAlgError:  # pixels on a few lines (a map of columns): no surface to fit
         return None
     x, y = pts[inside, 0], pts[inside, 1]
-    bend = (_surface_at(coef, x, y) - _surface_at(_plane_fit(pts[inside]), x, y)).abs()
+    bend = (_surface_at(coef, x, y) - _surface_at(flat, x, y)).abs()
     step = max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC * float(pts[inside, 2].median()))
     return None if float(bend.max()) > step else (band, coef)
 

@@ -332,6 +332,8 @@ def test_a_dome_is_no_bent_floor():
     assert band == 0.5 and float(bent[3:].abs().max()) > 0
     dome = torch.stack([x, y, flat + 8.0 * (1 - (x / 160 - 1) ** 2 - (y / 120 - 1) ** 2)], 1)
     assert own_surface(coef, dome, 0.5, 2.0, 100.0, 240, 320) is None
+    row = torch.stack([x, torch.zeros_like(x), torch.full_like(x, 50.0)], 1)  # one row: no surface to fit
+    assert own_surface(coef, row, 0.5, 2.0, 100.0, 240, 320) is None
     h, w = 240, 320
     yy = torch.arange(h, dtype=torch.float32)[:, None] / 120 - 1
     xx = torch.arange(w, dtype=torch.float32)[None, :] / 160 - 1
