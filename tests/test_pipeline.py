@@ -331,7 +331,7 @@ def test_a_filtered_map_s_ground_band_is_what_the_median_leaves_of_its_noise():
     plane = fit_ground_plane(read.disparity, read.valid, cfg.ground, sigma=sigma)
     assert plane.tol == pytest.approx(cfg.ground.noise_band * sigma) and plane.inlier_frac > 0.93
     # σ read off the filtered map sets no band above tol_px; the plane's own spread about it (the
-    # median's error is correlated: ground.own_band) still widens it to hold the floor
+    # median's error is correlated: support_surface.own_band) still widens it to hold the floor
     underrated = fit_ground_plane(read.disparity, read.valid, cfg.ground)
     assert cfg.ground.noise_band * noise_sigma(read.disparity, read.valid) < cfg.ground.tol_px
     assert underrated.tol > 1.2 * cfg.ground.tol_px and underrated.inlier_frac > 0.93

@@ -40,8 +40,8 @@ class GroundConfig(Validated):
             0.5 px off the plane); dropped where it exceeds half the map's 1–99 % disparity range (a
             map of noise, no surface). A support plane (not one the position rule alone verifies)
             takes this many times the spread of its own pixels about it where that is wider and
-            resolved (:func:`~somtorch.tasks.ground.own_band`: an error correlated across pixels, a
-            dense sensor's filtered map, which neighbour differences do not see). 0 = off.
+            resolved (:func:`~somtorch.tasks.support_surface.own_band`: an error correlated across
+            pixels, a dense sensor's filtered map, which neighbour differences do not see). 0 = off.
         min_inlier_frac: a plane needs this share of the valid pixels.
         min_slope_frac: ``b · H`` (disparity gained from top to bottom) must be at least this share
             of the disparity range: a floor spans it, from its horizon to the nearest thing in view;

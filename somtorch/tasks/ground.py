@@ -26,14 +26,14 @@ rule).
 
 The band is ``noise_band`` × the map's per-pixel noise (read by neighbour differences), at least
 ``tol_px`` and ``tol_frac`` of its range. A support plane's band is also ``noise_band`` × the spread
-of its own pixels about it where that is wider and resolved (:func:`own_band`): a dense sensor
-filters its map, so its error is correlated across pixels and neighbour differences read a fraction
-of it. A dense sensor's calibration residue bends its floor by a fraction of a pixel towards the
-corners, so a plane's band misses the floor's rim: the support may be a **bent** surface
-(:func:`own_surface`), fitted by the same rounds as the own band, refused where it departs from the
-plane nearest its pixels by more than a depth edge (the object step's continuity step), and taken
-where it passes a support test no plane passes (any, where none passes; the rim test, where the
-plane passed by its share of the pixels alone). It is reported as :attr:`GroundPlane.bend`.
+of its own pixels about it where that is wider and resolved
+(:func:`~somtorch.tasks.support_surface.own_band`): a dense sensor filters its map, so its error is
+correlated across pixels and neighbour differences read a fraction of it. A dense sensor's
+calibration residue bends its floor by a fraction of a pixel towards the corners, so a plane's band
+misses the floor's rim: the support may be a **bent** surface
+(:func:`~somtorch.tasks.support_surface.own_surface`), taken where it passes a support test no
+plane passes (any, where none passes; the rim test, where the plane passed by its share of the
+pixels alone). It is reported as :attr:`GroundPlane.bend`.
 """
 
 from __future__ import annotations
@@ -44,9 +44,9 @@ from dataclasses import dataclass, field
 import torch
 
 from ..config import GroundConfig
-from ..config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX
 from ..config.options import GROUND_RULES as RULES
 from ..validation import check_tensor
+from .support_surface import own_band, own_surface, plane_fit, surface_map
 
 
 @dataclass
@@ -55,7 +55,7 @@ class GroundPlane:
     support test verified it (rules ``"support"`` and ``"either"``), not only the position test;
     ``rim_frac``: the share of the view's rim (:func:`view_rim`) in its band (None: not measured);
     ``bend``: ``(e, f, g)`` of a bent support ``d = a·x + b·y + c + e·x² + f·x·y + g·y²``
-    (:func:`own_surface`; zeros for a plane)."""
+    (:func:`~somtorch.tasks.support_surface.own_surface`; zeros for a plane)."""
 
     a: float
     b: float
@@ -74,7 +74,7 @@ class GroundPlane:
         key = (h, w, self.a, self.b, self.c, self.bend)
         if key not in self._cache:
             self._cache.clear()
-            self._cache[key] = _surface((self.a, self.b, self.c, *self.bend), h, w).float()
+            self._cache[key] = surface_map((self.a, self.b, self.c, *self.bend), h, w).float()
         return self._cache[key]
 
     def as_dict(self) -> dict:
@@ -172,24 +172,26 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
         return _verified(coef[best], pts, disparity, ok, n_valid, band, min_b, cfg, rim)
 
     counts = inliers(tol)
-    if cfg.noise_band > 0 and cfg.rule != "position":
+    top = coef[int(torch.argmax(counts))]  # the hypothesis with the most pixels in the band
+    own = cfg.noise_band > 0 and cfg.rule != "position"  # a support surface's own band and shape
+    if own:
         # a support surface whose error is correlated over many pixels (a dense sensor's filtered
         # map) differs little from its neighbours, so the noise reading above misses it: its band
-        # is the spread of its own pixels about it, where that spread is resolved (:func:`own_band`)
+        # is the spread of its own pixels about it, where that spread is resolved (own_band)
         # and the plane so banded is the verified support
-        wide = own_band(coef[int(torch.argmax(counts))], pts, tol, cfg.noise_band, 0.5 * span)
+        wide = own_band(top, pts, tol, cfg.noise_band, 0.5 * span)
         if wide > tol:
             plane = best_plane(wide, inliers(wide))
             if plane is not None and plane.support:
                 return plane
     plane = best_plane(tol, counts)
     short_rim = plane is not None and plane.support and plane.rim_frac < cfg.support_frac
-    if (plane is None or short_rim) and cfg.noise_band > 0 and cfg.rule != "position":
+    if own and (plane is None or short_rim):
         # no plane passes, or one passes by its share of the pixels but misses the view's rim: a dense
         # sensor's calibration residue bends its floor by a fraction of a pixel, and a plane's band
-        # then misses the floor's rim (:func:`own_surface`). The bent surface is taken where it
+        # then misses the floor's rim (own_surface). The bent surface is taken where it
         # passes a support test that the plane does not: any, or the rim's
-        bent = own_surface(coef[int(torch.argmax(counts))], pts, tol, cfg.noise_band, 0.5 * span, h, w)
+        bent = own_surface(top, pts, tol, cfg.noise_band, 0.5 * span, h, w)
         if bent is not None:
             curved = verify_plane(tuple(float(v) for v in bent[1]), disparity, ok, bent[0], cfg, min_b=min_b,
                                   n_valid=n_valid, rim=rim)
@@ -197,122 +199,6 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
             if passes and (plane is None or curved.rim_frac >= cfg.support_frac):
                 return curved
     return plane
-
-
-def own_surface(coef: torch.Tensor, pts: torch.Tensor, tol: float, k: float, cap: float, h: int,
-                w: int) -> tuple[float, torch.Tensor] | None:
-    """The bent surface ``d = a·x + b·y + c + e·x² + f·x·y + g·y²`` that holds the pixels of the plane
-    ``coef`` = (a, b, c) among ``pts`` ``(N, 3)`` rows (x, y, d) of an ``(h, w)`` map, and its band:
-    ``(band, (a, b, c, e, f, g))``, or None.
-
-    The rounds of :func:`own_band`, with the quadratic surface refitted on the pixels within the band
-    in place of the plane. None where the band would pass the depth-continuity step or ``cap`` (no
-    peak: a run of surfaces), or where the surface departs from the plane nearest its pixels by more
-    than the continuity step at their median disparity: a floor bent by its sensor's calibration
-    departs by a fraction of a pixel, a dome or a ramp of steps by a depth edge.
-    """
-    coef = torch.cat([coef.double(), torch.zeros(3, dtype=torch.float64)])
-    try:
-        band, coef, end = _own_rounds(coef, pts, tol, k, cap, lambda p: _surface_fit(p, h, w), 6)
-        if end != "peak":
-            return None
-        inside = (pts[:, 2] - _surface_at(coef, pts[:, 0], pts[:, 1])).abs() < band
-        if int(inside.sum()) < 6:
-            return None
-        flat = _plane_fit(pts[inside])
-    except torch.linalg.LinAlgError:  # pixels on a few lines (a map of columns): no surface to fit
-        return None
-    x, y = pts[inside, 0], pts[inside, 1]
-    bend = (_surface_at(coef, x, y) - _surface_at(flat, x, y)).abs()
-    step = max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC * float(pts[inside, 2].median()))
-    return None if float(bend.max()) > step else (band, coef)
-
-
-def _surface_at(coef: torch.Tensor, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-    """``d = a·x + b·y + c + e·x² + f·x·y + g·y²`` at ``x``, ``y`` (float64); ``coef`` = (a, b, c) or
-    (a, b, c, e, f, g)."""
-    x, y = x.double(), y.double()
-    d = coef[0] * x + coef[1] * y + coef[2]
-    if len(coef) > 3:
-        d = d + coef[3] * x * x + coef[4] * x * y + coef[5] * y * y
-    return d
-
-
-def _surface(coef, h: int, w: int) -> torch.Tensor:
-    """The surface ``coef`` (:func:`_surface_at`) at every pixel of an ``(H, W)`` map, float64."""
-    ys = torch.arange(h, dtype=torch.float64)[:, None]
-    xs = torch.arange(w, dtype=torch.float64)[None, :]
-    coef = tuple(coef) if any(coef[3:]) else tuple(coef[:3])  # a plane: no quadratic terms to add
-    return _surface_at(torch.tensor(coef, dtype=torch.float64), xs, ys)
-
-
-def _surface_fit(pts: torch.Tensor, h: int, w: int) -> torch.Tensor:
-    """Least-squares (a, b, c, e, f, g) of :func:`_surface_at` through ``pts`` ``(N, 3)`` rows (x, y, d),
-    from element-wise float64 sums in coordinates scaled to the map (x / w, y / h)."""
-    u, v, d = pts[:, 0].double() / w, pts[:, 1].double() / h, pts[:, 2].double()
-    cols = (u, v, torch.ones_like(u), u * u, u * v, v * v)
-    ata = torch.tensor([[float((p * q).sum()) for q in cols] for p in cols], dtype=torch.float64)
-    atb = torch.tensor([float((p * d).sum()) for p in cols], dtype=torch.float64)
-    beta = torch.linalg.solve(ata, atb)
-    return beta / torch.tensor([w, h, 1.0, w * w, w * h, h * h], dtype=torch.float64)
-
-
-#: :func:`own_band` stops when a round widens the band by less than this share (a numerical
-#: tolerance: the band converges geometrically) …
-OWN_BAND_RTOL = 0.01
-#: … or after this many rounds.
-OWN_BAND_ROUNDS = 50
-
-
-def own_band(coef: torch.Tensor, pts: torch.Tensor, tol: float, k: float, cap: float) -> float:
-    """The band of the plane ``coef`` = (a, b, c) that holds its own pixels among ``pts`` ``(N, 3)``
-    rows (x, y, d): ``k`` × their spread about it, at least ``tol``.
-
-    The plane is refitted by least squares on the pixels within the band, and the band set to ``k``
-    × the standard deviation of their residuals, corrected for the truncation at ± the band (a normal
-    error truncated at ± k σ has the standard deviation ``truncated_sd(k)`` σ); repeated while the
-    band grows. A surface whose error is a peak of width σ converges at k σ (a per-pixel error,
-    however correlated across pixels, or a smooth distortion of the map). A band that would pass the
-    object step's depth-continuity step at the median disparity of its pixels
-    (``max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC · d)``: what the method calls a depth edge)
-    or ``cap`` has found no peak but a run of surfaces (the objects on the plane, a room): ``tol``
-    is returned.
-    """
-    band, _, end = _own_rounds(coef, pts, tol, k, cap, _plane_fit, 3)
-    return tol if end == "run" else band
-
-
-def _own_rounds(coef: torch.Tensor, pts: torch.Tensor, tol: float, k: float, cap: float, fit,
-                n_min: int) -> tuple[float, torch.Tensor, str]:
-    """The rounds of :func:`own_band` and :func:`own_surface` from the surface ``coef``
-    (:func:`_surface_at`), refitted by ``fit`` on the pixels of ``pts`` within the band: (band, its
-    surface, how it ended: ``"peak"`` converged, ``"run"`` past the continuity step or ``cap``,
-    ``"few"`` under ``n_min`` pixels in the band)."""
-    ratio = truncated_sd(k)
-    band = tol
-    for _ in range(OWN_BAND_ROUNDS):
-        inside = (pts[:, 2] - _surface_at(coef, pts[:, 0], pts[:, 1])).abs() < band
-        if int(inside.sum()) < n_min:
-            return band, coef, "few"
-        coef = fit(pts[inside])
-        r = pts[:, 2] - _surface_at(coef, pts[:, 0], pts[:, 1])
-        inside = r.abs() < band
-        if int(inside.sum()) < n_min:
-            return band, coef, "few"
-        wider = max(tol, k * float(r[inside].std()) / ratio)
-        step = max(CONTINUITY_STEP_PX, CONTINUITY_STEP_FRAC * float(pts[inside, 2].median()))
-        if wider > min(cap, step):
-            return band, coef, "run"
-        if wider <= band * (1.0 + OWN_BAND_RTOL):
-            break
-        band = wider
-    return band, coef, "peak"
-
-
-def truncated_sd(k: float) -> float:
-    """The standard deviation of a standard normal truncated to [−k, k] (k > 0)."""
-    phi = math.exp(-0.5 * k * k) / math.sqrt(2.0 * math.pi)
-    return math.sqrt(1.0 - 2.0 * k * phi / math.erf(k / math.sqrt(2.0)))
 
 
 def _sample(yx: torch.Tensor, disparity: torch.Tensor, n: int, g: torch.Generator) -> torch.Tensor:
@@ -413,7 +299,7 @@ def _verified(best: torch.Tensor, pts: torch.Tensor, disparity: torch.Tensor, ok
     # refine by least squares on the inliers of the sampled pixels, then recompute on the full map
     inl = (best[0] * pts[:, 0] + best[1] * pts[:, 1] + best[2] - pts[:, 2]).abs() < tol
     if int(inl.sum()) >= 3:
-        best = _plane_fit(pts[inl])
+        best = plane_fit(pts[inl])
     return verify_plane(tuple(float(v) for v in best), disparity, ok, tol, cfg, min_b=min_b, n_valid=n_valid,
                         rim=rim)
 
@@ -422,9 +308,10 @@ def verify_plane(coef: tuple[float, ...], disparity: torch.Tensor, ok: torch.Ten
                  cfg: GroundConfig, *, min_b: float = 0.0, n_valid: int | None = None,
                  rim: torch.Tensor | None = None) -> GroundPlane | None:
     """The plane ``d = a·x + b·y + c`` (``coef`` = (a, b, c); a bent surface: (a, b, c, e, f, g),
-    :func:`own_surface`) with band ``tol`` px as a :class:`GroundPlane` if it passes the tests of
-    ``cfg.rule`` on the map (see the module docstring; ``min_b``: the position rule's least ``b``;
-    ``rim``: :func:`view_rim` of ``ok`` where the caller has it), else None.
+    :func:`~somtorch.tasks.support_surface.own_surface`) with band ``tol`` px as a
+    :class:`GroundPlane` if it passes the tests of ``cfg.rule`` on the map (see the module docstring;
+    ``min_b``: the position rule's least ``b``; ``rim``: :func:`view_rim` of ``ok`` where the caller
+    has it), else None.
 
     Shape:
         ``disparity``, ``ok`` (valid, finite pixels), ``rim`` ``(H, W)``.
@@ -439,7 +326,7 @@ def verify_plane(coef: tuple[float, ...], disparity: torch.Tensor, ok: torch.Ten
     position = b >= min_b and abs(a) <= b * w / h
     if cfg.rule == "position" and not position:
         return None
-    plane = _surface((a, b, c, *bend), h, w)
+    plane = surface_map((a, b, c, *bend), h, w)
     d = disparity.double()
     mask = ok & ((plane - d).abs() < tol)
     frac = int(mask.sum()) / n_valid
@@ -461,15 +348,3 @@ def rim_share(mask: torch.Tensor, rim: torch.Tensor) -> float:
     """The share of the view's rim (``rim``: :func:`view_rim` of the valid pixels) that ``mask``
     holds (0 without a rim). Shape: ``mask``, ``rim`` ``(H, W)``."""
     return int((mask & rim).sum()) / max(int(rim.sum()), 1)
-
-
-def _plane_fit(pts: torch.Tensor) -> torch.Tensor:
-    """Least-squares ``(a, b, c)`` of ``d = a·x + b·y + c`` through ``pts`` ``(N, 3)`` rows (x, y, d),
-    by the 3 × 3 normal equations from element-wise float64 sums: the same bits on every run
-    (``torch.linalg.lstsq`` differed in the last digits between identical runs)."""
-    x, y, d = pts[:, 0].double(), pts[:, 1].double(), pts[:, 2].double()
-    one = torch.ones_like(x)
-    cols = (x, y, one)
-    ata = torch.tensor([[float((u * v).sum()) for v in cols] for u in cols], dtype=torch.float64)
-    atb = torch.tensor([float((u * d).sum()) for u in cols], dtype=torch.float64)
-    return torch.linalg.solve(ata, atb)

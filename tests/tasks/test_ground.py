@@ -244,20 +244,24 @@ def test_a_floor_whose_noise_is_correlated_is_banded_by_its_own_spread():
     assert float((residual[floor] < 0.5).float().mean()) < 0.75  # what the 0.5 px band held
 
 
+def _sampled_xy(g: torch.Generator, n: int = 20_000) -> tuple[torch.Tensor, torch.Tensor]:
+    """``n`` pixel positions (x, y) drawn uniformly over a 320 × 240 map, float64."""
+    x = 320 * torch.rand(n, generator=g, dtype=torch.float64)
+    return x, 240 * torch.rand(n, generator=g, dtype=torch.float64)
+
+
 def test_a_band_that_finds_no_peak_is_not_widened():
     """A dome (no plane: its pixels lie up to several px off any plane through them) and a floor of
     two surfaces whose spread runs past the depth-continuity step keep the band they started with;
     a plane with Gaussian noise converges at noise_band × its σ."""
-    from somtorch.tasks.ground import own_band, truncated_sd
+    from somtorch.tasks.support_surface import own_band, truncated_sd
 
     assert abs(truncated_sd(2.0) - 0.8796) < 1e-4 and abs(truncated_sd(50.0) - 1.0) < 1e-9
     g = torch.Generator().manual_seed(7)
-    n = 20_000
-    x = 320 * torch.rand(n, generator=g, dtype=torch.float64)
-    y = 240 * torch.rand(n, generator=g, dtype=torch.float64)
+    x, y = _sampled_xy(g)
     coef = torch.tensor([0.0, 0.05, 40.0], dtype=torch.float64)
     flat = coef[1] * y + coef[2]
-    noisy = torch.stack([x, y, flat + 0.6 * torch.randn(n, generator=g, dtype=torch.float64)], 1)
+    noisy = torch.stack([x, y, flat + 0.6 * torch.randn(x.numel(), generator=g, dtype=torch.float64)], 1)
     assert abs(own_band(coef, noisy, 0.5, 2.0, 100.0) - 2 * 0.6) < 0.06
     dome = torch.stack([x, y, flat + 8.0 * ((x / 160 - 1) ** 2 + (y / 120 - 1) ** 2)], 1)
     assert own_band(coef, dome, 0.5, 2.0, 100.0) == 0.5
@@ -319,12 +323,9 @@ def test_a_dome_is_no_bent_floor():
     """A surface that departs from its nearest plane by more than a depth edge (the object step's
     continuity step) is a thing, not a bent floor: a dome filling the view is never a support, while
     a sub-pixel bowl is fitted at the band it started with."""
-    from somtorch.tasks.ground import own_surface
+    from somtorch.tasks.support_surface import own_surface
 
-    g = torch.Generator().manual_seed(3)
-    n = 20_000
-    x = 320 * torch.rand(n, generator=g, dtype=torch.float64)
-    y = 240 * torch.rand(n, generator=g, dtype=torch.float64)
+    x, y = _sampled_xy(torch.Generator().manual_seed(3))
     coef = torch.tensor([0.0, 0.02, 50.0], dtype=torch.float64)
     flat = coef[1] * y + coef[2]
     bowl = torch.stack([x, y, flat * (1 + 0.01 * ((x / 160 - 1) ** 2 + (y / 120 - 1) ** 2 - 1))], 1)
