@@ -174,30 +174,38 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     counts = inliers(tol)
     top = coef[int(torch.argmax(counts))]  # the hypothesis with the most pixels in the band
     own = cfg.noise_band > 0 and cfg.rule != "position"  # a support surface's own band and shape
+
+    def short_rim(plane: GroundPlane | None) -> bool:  # verified by its share of the pixels alone
+        return plane is not None and plane.support and plane.rim_frac < cfg.support_frac
+
+    def bent_support(plane: GroundPlane | None) -> GroundPlane | None:
+        """The bent surface where it passes a support test that ``plane`` does not: any, where no plane
+        passes; the rim's, where ``plane`` passed by its share of the pixels alone. Else None."""
+        bent = own_surface(top, pts, tol, cfg.noise_band, 0.5 * span, h, w)
+        if bent is None:
+            return None
+        curved = verify_plane(tuple(float(v) for v in bent[1]), disparity, ok, bent[0], cfg, min_b=min_b,
+                              n_valid=n_valid, rim=rim)
+        passes = curved is not None and curved.support
+        return curved if passes and (plane is None or curved.rim_frac >= cfg.support_frac) else None
+
     if own:
         # a support surface whose error is correlated over many pixels (a dense sensor's filtered
         # map) differs little from its neighbours, so the noise reading above misses it: its band
         # is the spread of its own pixels about it, where that spread is resolved (own_band)
-        # and the plane so banded is the verified support
+        # and the plane so banded is the verified support — or, where it misses the view's rim,
+        # the bent surface that holds it (session 23: a bowl the wider band did not close)
         wide = own_band(top, pts, tol, cfg.noise_band, 0.5 * span)
         if wide > tol:
             plane = best_plane(wide, inliers(wide))
             if plane is not None and plane.support:
-                return plane
+                return (bent_support(plane) if short_rim(plane) else None) or plane
     plane = best_plane(tol, counts)
-    short_rim = plane is not None and plane.support and plane.rim_frac < cfg.support_frac
-    if own and (plane is None or short_rim):
+    if own and (plane is None or short_rim(plane)):
         # no plane passes, or one passes by its share of the pixels but misses the view's rim: a dense
         # sensor's calibration residue bends its floor by a fraction of a pixel, and a plane's band
-        # then misses the floor's rim (own_surface). The bent surface is taken where it
-        # passes a support test that the plane does not: any, or the rim's
-        bent = own_surface(top, pts, tol, cfg.noise_band, 0.5 * span, h, w)
-        if bent is not None:
-            curved = verify_plane(tuple(float(v) for v in bent[1]), disparity, ok, bent[0], cfg, min_b=min_b,
-                                  n_valid=n_valid, rim=rim)
-            passes = curved is not None and curved.support
-            if passes and (plane is None or curved.rim_frac >= cfg.support_frac):
-                return curved
+        # then misses the floor's rim (own_surface)
+        return bent_support(plane) or plane
     return plane
 
 
