@@ -55,7 +55,7 @@ def _load(spec: Any, data_dir: Path) -> Any:
 
 
 JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S", "quantize:Q", "scale:F", "bowl:P",
-              "blotch:S", "smear:S", "relief:F", "wide:F")
+              "blotch:S", "smear:S", "relief:F", "wide:F", "offset:T")
 #: ``blotch:S``: the correlation length of its noise, as a share of the image's shorter side.
 BLOTCH_SCALE = 0.02
 
@@ -71,7 +71,8 @@ def check_junk_kind(kind: str) -> None:
                                   ("blotch:", "a positive standard deviation in px", "blotch:0.5"),
                                   ("smear:", "a positive blur radius in px", "smear:2"),
                                   ("relief:", "a positive factor", "relief:0.5"),
-                                  ("wide:", "a factor in (0, 1]", "wide:0.5")):
+                                  ("wide:", "a factor in (0, 1]", "wide:0.5"),
+                                  ("offset:", "a positive offset in px", "offset:20")):
         if kind.startswith(prefix):
             try:
                 v = float(kind.split(":", 1)[1])
@@ -113,6 +114,10 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
     if kind.startswith("scale:"):  # another rig: f·B (focal length × baseline) multiplies every disparity
         f = float(kind.split(":", 1)[1])
         return dataclasses.replace(scene, disparity=torch.where(scene.valid, scene.disparity * f, scene.disparity),
+                                   name=f"{scene.name}+{kind}")
+    if kind.startswith("offset:"):  # a rig whose principal points differ: d + T (Middlebury's doffs)
+        t = float(kind.split(":", 1)[1])
+        return dataclasses.replace(scene, disparity=torch.where(scene.valid, scene.disparity + t, scene.disparity),
                                    name=f"{scene.name}+{kind}")
     if kind.startswith("bowl:"):  # a dense sensor's systematic error: relative, growing to the corners
         p = float(kind.split(":", 1)[1])

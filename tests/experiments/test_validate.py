@@ -417,6 +417,27 @@ def test_relief_junk_flattens_the_world_towards_its_mean_plane_keeping_planes_pl
         add_junk(scene, "relief:0")
 
 
+def test_offset_junk_adds_a_constant_to_every_valid_disparity_keeping_planes_planar():
+    """A rig whose two principal points differ by T px measures d + T (Middlebury's ``doffs``): every
+    valid disparity moves by T, steps between surfaces and every plane's slope are kept."""
+    import dataclasses
+
+    import torch
+
+    from experiments.scenes import add_junk
+
+    scene = _toy_scene()
+    hole = torch.ones_like(scene.valid)
+    hole[:5, :10] = False  # missing pixels keep their value and stay missing
+    scene = dataclasses.replace(scene, valid=hole)
+    out = add_junk(scene, "offset:20")
+    assert torch.allclose(out.disparity[scene.valid], scene.disparity[scene.valid] + 20.0)
+    assert torch.equal(out.disparity[~scene.valid], scene.disparity[~scene.valid])
+    assert torch.equal(out.valid, scene.valid) and out.name == "toy+offset:20"
+    with pytest.raises(ValueError, match="positive offset"):
+        add_junk(scene, "offset:-5")
+
+
 def test_wide_junk_shrinks_the_view_into_its_centre_and_continues_the_floor_around_it():
     import torch
 
@@ -475,7 +496,7 @@ def test_an_unknown_transform_fails_before_any_work(tmp_path):
     from experiments.scenes import check_junk_kind
 
     for ok in ("flip", "pole", "resample:0.5", "noise:0.5", "bowl:0.01", "blotch:0.5", "smear:2", "relief:0.5",
-               "wide:0.5"):
+               "wide:0.5", "offset:20"):
         check_junk_kind(ok)
     for bad, msg in (("rotate", "unknown junk kind"), ("resample:-2", "positive factor"),
                      ("resample:x", "positive factor"), ("noise:0", "positive standard deviation"),
