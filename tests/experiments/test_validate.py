@@ -439,8 +439,6 @@ def test_offset_junk_adds_a_constant_to_every_valid_disparity_keeping_planes_pla
 
 
 def test_wide_junk_shrinks_the_view_into_its_centre_and_continues_the_floor_around_it():
-    import torch
-
     from experiments.scenes import add_junk
 
     scene = _toy_scene()  # a flat background at 10 px, an object 20 … 23.9 px at rows 20–49, cols 30–69
