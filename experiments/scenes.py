@@ -26,6 +26,42 @@ def load_dev_scene(spec: Any, data_dir: str | Path) -> Any:
     return add_junk(scene, spec.junk, seed=sum(map(ord, spec.name))) if spec.junk else scene
 
 
+def rematched(spec: Any, scene: Any, variant: str, data_dir: str | Path, corpus: str | Path | None = None
+              ) -> Any | None:
+    """``scene`` (the frame of ``spec``) with its SGBM map matched again from its stereo pair under
+    the corpus's setting changed by ``SGBM_VARIANTS[variant]`` (the ``sgbm:NAME`` transform): the
+    objects, image and camera kept. None for a frame whose map is not SGBM's from a pair the
+    corpus holds (ground truth, a device's or an estimator's map, a frame with junk added).
+    Synthetic frames read ``im0.png`` / ``im1.png`` and their ``ndisp`` (``calib.txt``) from the
+    corpus (``corpus``, else :func:`~experiments.datasets.corpus_dir`); real ones ``spec.left`` /
+    ``spec.right`` under ``data_dir``."""
+    import dataclasses
+
+    from somtorch.disparity import scene_from_arrays
+    from somtorch.disparity.io import read_image
+    from somtorch.disparity.stereo import SGBMParams, compute_disparity
+
+    check_junk_kind(f"sgbm:{variant}")
+    if spec.junk:
+        return None
+    if spec.synthetic and spec.disparity == "disp_sgbm.pfm":
+        from .datasets import corpus_dir
+
+        path = Path(corpus or corpus_dir()) / spec.folder
+        pair = ("im0.png", "im1.png")
+        calib = dict(line.split("=", 1) for line in (path / "calib.txt").read_text().split() if "=" in line)
+        ndisp = int(calib["ndisp"])
+    elif not spec.synthetic and spec.disparity == "sgbm":
+        path, pair, ndisp = Path(data_dir) / spec.folder, (spec.left, spec.right), spec.ndisp
+    else:
+        return None
+    images = [read_image(path / f).permute(1, 2, 0).numpy()[..., ::-1].copy() for f in pair]  # BGR
+    params = dataclasses.replace(SGBMParams(numDisparities=ndisp), **SGBM_VARIANTS[variant])
+    disp, valid = compute_disparity(images[0], images[1], params)
+    return scene_from_arrays(disp, valid, image=scene.image, objects=scene.objects,
+                             object_info=scene.object_info, camera=scene.camera, name=f"{scene.name}+sgbm:{variant}")
+
+
 def _load(spec: Any, data_dir: Path) -> Any:
     from somtorch.disparity.io import read_image
     from somtorch.disparity import load_scene, scene_from_arrays
@@ -55,7 +91,17 @@ def _load(spec: Any, data_dir: Path) -> Any:
 
 
 JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S", "quantize:Q", "scale:F", "bowl:P",
-              "blotch:S", "smear:S", "relief:F", "wide:F", "offset:T")
+              "blotch:S", "smear:S", "relief:F", "wide:F", "offset:T", "sgbm:NAME")
+#: ``sgbm:NAME``: the frame's stereo pair matched again with the corpus's SGBM setting
+#: (:class:`~somtorch.disparity.stereo.SGBMParams`, its number of disparities) changed by these
+#: fields — what another camera's matcher may be set to (:func:`rematched`).
+SGBM_VARIANTS = {
+    # the corpus setting without its filters: no uniqueness margin, no left-right check, no speckle filter
+    "raw": {"uniquenessRatio": 0, "disp12MaxDiff": -1, "speckleWindowSize": 0},
+    # a setting common in OpenCV's examples: a 7 px block, P1 / P2 from it, plain SGBM, a wide speckle range
+    "tutorial": {"blockSize": 7, "P1": 8 * 3 * 7 ** 2, "P2": 32 * 3 * 7 ** 2, "speckleRange": 32,
+                 "mode": "sgbm"},
+}
 #: ``blotch:S``: the correlation length of its noise, as a share of the image's shorter side.
 BLOTCH_SCALE = 0.02
 
@@ -82,6 +128,11 @@ def check_junk_kind(kind: str) -> None:
             if ok:
                 return
             raise ValueError(f"junk kind {kind!r}: {prefix[:-1]} needs {what}, e.g. {example}")
+    if kind.startswith("sgbm:"):
+        if kind[5:] in SGBM_VARIANTS:
+            return
+        raise ValueError(f"junk kind {kind!r}: sgbm needs a setting of {', '.join(SGBM_VARIANTS)}, "
+                         "e.g. sgbm:raw")
     if kind not in JUNK_KINDS:
         raise ValueError(f"unknown junk kind {kind!r}: {', '.join(JUNK_KINDS)}")
 
@@ -99,6 +150,9 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
     from somtorch.disparity.resize import resize_scene
 
     check_junk_kind(kind)
+    if kind.startswith("sgbm:"):
+        raise ValueError(f"junk kind {kind!r} matches a frame's stereo pair again: rematched(spec, ...), "
+                         "not add_junk (a transform of validate)")
     if kind.startswith("resample:"):
         f = float(kind.split(":", 1)[1])
         out = resize_scene(scene, max(8, round(scene.width * f)), max(8, round(scene.height * f)))

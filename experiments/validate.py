@@ -218,7 +218,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     if cfg.gallery is not None:
         for c in caches:
             gallery(c, Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
-    robustness = {t: transformed(caches, t, cfg.baselines, cfg.reduction) for t in cfg.transforms}
+    robustness = {t: transformed(caches, t, cfg.baselines, cfg.reduction, data_dir) for t in cfg.transforms}
     return {"grid": grid, "defaults": defaults, "neutral": dict(cfg.neutral), "in_sample_choice": in_sample,
             "in_sample_steps": in_sample_steps, "folds": folds, "rows": rows, "summary": summary, "knobs": knobs,
             "rule": {"n_boot": cfg.n_boot, "loss_margin": cfg.loss_margin, "ni_margin": cfg.ni_margin,
@@ -258,15 +258,17 @@ def _progress(total: int) -> Any:
 
 
 def transformed(caches: list[SceneCache], kind: str, baselines: list[str] | None = None,
-                reduction: Any = None) -> dict[str, dict[str, Any]]:
+                reduction: Any = None, data_dir: str | Path | None = None) -> dict[str, dict[str, Any]]:
     """The default scores of every scene of ``caches`` transformed by ``add_junk(scene, kind)``,
     by scene name, each with ``"baselines"``: the task baselines of ``baselines`` run once on the
     same transformed scene (:func:`~experiments.validate_baselines.baseline_counts`; ``reduction``:
     the reduction config they are scored with), so that a probe reads the pipeline and its peers
     side by side. A transform is a check of the rule (a mirrored or resampled scene is as easy
     as the original; a pole in front of the object is a failure class), not a tuning scene: the
-    folds never see it. Scenes already resampled are skipped by a resampling transform."""
-    from .scenes import add_junk
+    folds never see it. Scenes already resampled are skipped by a resampling transform; ``sgbm:NAME``
+    matches each frame's stereo pair again (:func:`~experiments.scenes.rematched`, pairs under
+    ``data_dir`` or in the corpus) and skips the frames whose map is not SGBM's."""
+    from .scenes import add_junk, rematched
     from .validate_baselines import baseline_counts
 
     out = {}
@@ -274,7 +276,12 @@ def transformed(caches: list[SceneCache], kind: str, baselines: list[str] | None
         if kind.startswith("resample:") and (c.spec.junk or "").startswith("resample:"):
             continue
         t0 = time.perf_counter()
-        scene = add_junk(c.scene, kind, seed=sum(map(ord, c.spec.name)))
+        if kind.startswith("sgbm:"):
+            scene = rematched(c.spec, c.scene, kind[5:], data_dir or ".")
+            if scene is None:
+                continue
+        else:
+            scene = add_junk(c.scene, kind, seed=sum(map(ord, c.spec.name)))
         tc = SceneCache(c.spec, scene, c.base)
         out[c.spec.name] = sc = tc.score({})
         sc["baselines"] = baseline_counts(scene, baselines, reduction, c.spec.camera) if baselines else {}

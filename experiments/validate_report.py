@@ -132,6 +132,10 @@ def to_markdown(report: dict[str, Any]) -> str:
         for k in robust:
             v = list(robust[k].values())
             out.append(row(k, v, [x.get("baselines") or {} for x in v]))
+            if len(v) < len(report["rows"]):  # a transform of some frames: those frames as given too
+                same = [r for r in report["rows"] if r["frame"] in robust[k]]
+                out.append(row(f"{k}: the same frames as given", [r["default"] for r in same],
+                               [r.get("baselines") or {} for r in same]))
     from .validate_baselines import baselines_markdown
 
     return "\n".join(out) + "\n" + baselines_markdown(report)

@@ -215,14 +215,15 @@ def test_scene_cache_reads_a_noisy_frame_through_the_median_as_run_pipeline_does
 def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "experiments.validate", f"hydra.run.dir={tmp_path}", "ensemble=2",
-         "train.epochs=3", "frames=[kitti,kitti_est,oakd_toy,oakd_cycles,eth3d_terrace]",
+         "train.epochs=3", "frames=[kitti,kitti_est,oakd_toy,oakd_cycles,eth3d_terrace_sgbm]",
          f"paths.data_dir={shared_data}", "n_boot=200", "~grid", "~neutral",
          "+grid={objects.merge: [0.0, 0.5], reduction.tolerance_image: [0.03]}", "+neutral={objects.merge: 0.0}",
-         "transforms=[flip]", f"gallery={tmp_path / 'gallery'}"],
+         "transforms=[flip,sgbm:raw]", f"gallery={tmp_path / 'gallery'}"],
         cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     rep = json.loads((tmp_path / "validate.json").read_text())
-    assert [r["frame"] for r in rep["rows"]] == ["kitti", "kitti_est", "oakd_toy", "oakd_cycles", "eth3d_terrace"]
+    assert [r["frame"] for r in rep["rows"]] == ["kitti", "kitti_est", "oakd_toy", "oakd_cycles",
+                                                 "eth3d_terrace_sgbm"]
     assert set(rep["folds"]) == {"kitti2015", "oakd", "eth3d"}
     sm = rep["summary"]
     assert sm["datasets"]["kitti2015"]["frames"] == 2 and sm["datasets"]["oakd"]["runs"] == 4
@@ -242,7 +243,10 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     assert rep["knobs"]["reduction.tolerance_image"]["verdict"] != "remove"  # no neutral value given
     md = (tmp_path / "validate.md").read_text()
     assert "| **macro, real** |" in md and "| objects.merge | 0.75 | 0.0 (neutral) |" in md
-    assert list(rep["robustness"]) == ["flip"] and "| flip |" in md
+    assert list(rep["robustness"]) == ["flip", "sgbm:raw"] and "| flip |" in md
+    # sgbm:raw re-matches the one frame whose map is SGBM's, and the table reads it beside that frame as given
+    assert list(rep["robustness"]["sgbm:raw"]) == ["eth3d_terrace_sgbm"]
+    assert "| sgbm:raw | " in md and "| sgbm:raw: the same frames as given | " in md
     # the probe runs the task baselines on the same transformed frames, and the table reads them
     flip = rep["robustness"]["flip"]
     assert set(flip) == {r["frame"] for r in rep["rows"]}
@@ -438,6 +442,40 @@ def test_offset_junk_adds_a_constant_to_every_valid_disparity_keeping_planes_pla
         add_junk(scene, "offset:-5")
 
 
+def test_sgbm_transform_matches_a_frames_stereo_pair_again_under_another_setting(tmp_path, monkeypatch):
+    """``sgbm:NAME`` re-matches the frame's own pair: the corpus's setting unchanged gives its stored
+    map bit for bit; ``raw`` (no uniqueness, left-right or speckle filter) gives a map with more
+    pixels matched, the objects kept; frames whose map is not SGBM's are skipped (None), and an
+    unknown setting fails naming the known ones."""
+    import dataclasses
+
+    import torch
+
+    from experiments.datasets import FrameSpec, load_frame
+    from experiments.scenes import SGBM_VARIANTS, add_junk, check_junk_kind, rematched
+    from somtorch.synth.frame import generate_frame
+    from somtorch.synth.store import write_frame
+
+    write_frame(generate_frame("floor", 0, "oakd", scale=0.25), tmp_path / "floor_oakd" / "00000")
+    spec = FrameSpec(name="f_sgbm", dataset="f", real=False, folder="floor_oakd/00000",
+                     disparity="disp_sgbm.pfm", synthetic=True)
+    scene = load_frame(spec, tmp_path, corpus=tmp_path)
+    monkeypatch.setitem(SGBM_VARIANTS, "as_stored", {})
+    same = rematched(spec, scene, "as_stored", tmp_path, corpus=tmp_path)
+    assert torch.equal(same.valid, scene.valid)
+    assert torch.equal(same.disparity[same.valid], scene.disparity[scene.valid])
+    raw = rematched(spec, scene, "raw", tmp_path, corpus=tmp_path)
+    assert int(raw.valid.sum()) > int(scene.valid.sum())  # the filters it drops leave pixels unmatched
+    assert torch.equal(raw.objects, scene.objects) and raw.name == "f_sgbm+sgbm:raw"
+    gt = dataclasses.replace(spec, name="f", disparity="gt")
+    assert rematched(gt, load_frame(gt, tmp_path, corpus=tmp_path), "raw", tmp_path, corpus=tmp_path) is None
+    assert rematched(dataclasses.replace(spec, junk="flip"), scene, "raw", tmp_path, corpus=tmp_path) is None
+    with pytest.raises(ValueError, match="sgbm needs a setting of raw, tutorial"):
+        check_junk_kind("sgbm:nope")
+    with pytest.raises(ValueError, match="rematched"):
+        add_junk(scene, "sgbm:raw")
+
+
 def test_wide_junk_shrinks_the_view_into_its_centre_and_continues_the_floor_around_it():
     from experiments.scenes import add_junk
 
@@ -494,7 +532,7 @@ def test_an_unknown_transform_fails_before_any_work(tmp_path):
     from experiments.scenes import check_junk_kind
 
     for ok in ("flip", "pole", "resample:0.5", "noise:0.5", "bowl:0.01", "blotch:0.5", "smear:2", "relief:0.5",
-               "wide:0.5", "offset:20"):
+               "wide:0.5", "offset:20", "sgbm:raw", "sgbm:tutorial"):
         check_junk_kind(ok)
     for bad, msg in (("rotate", "unknown junk kind"), ("resample:-2", "positive factor"),
                      ("resample:x", "positive factor"), ("noise:0", "positive standard deviation"),
