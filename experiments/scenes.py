@@ -59,7 +59,8 @@ def rematched(spec: Any, scene: Any, variant: str, data_dir: str | Path, corpus:
     params = dataclasses.replace(SGBMParams(numDisparities=ndisp), **SGBM_VARIANTS[variant])
     disp, valid = compute_disparity(images[0], images[1], params)
     return scene_from_arrays(disp, valid, image=scene.image, objects=scene.objects,
-                             object_info=scene.object_info, camera=scene.camera, name=f"{scene.name}+sgbm:{variant}")
+                             object_info=scene.object_info, camera=scene.camera,
+                             name=f"{scene.name}+sgbm:{variant}")
 
 
 def _load(spec: Any, data_dir: Path) -> Any:
@@ -171,8 +172,8 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
                                    name=f"{scene.name}+{kind}")
     if kind.startswith("offset:"):  # a rig whose principal points differ: d + T (Middlebury's doffs)
         t = float(kind.split(":", 1)[1])
-        return dataclasses.replace(scene, disparity=torch.where(scene.valid, scene.disparity + t, scene.disparity),
-                                   name=f"{scene.name}+{kind}")
+        moved = torch.where(scene.valid, scene.disparity + t, scene.disparity)
+        return dataclasses.replace(scene, disparity=moved, name=f"{scene.name}+{kind}")
     if kind.startswith("bowl:"):  # a dense sensor's systematic error: relative, growing to the corners
         p = float(kind.split(":", 1)[1])
         h, w = scene.disparity.shape
