@@ -38,8 +38,7 @@ def rematched(spec: Any, scene: Any, variant: str, data_dir: str | Path, corpus:
     import dataclasses
 
     from somtorch.disparity import scene_from_arrays
-    from somtorch.disparity.io import read_image
-    from somtorch.disparity.stereo import SGBMParams, compute_disparity
+    from somtorch.disparity.stereo import SGBMParams
 
     check_junk_kind(f"sgbm:{variant}")
     if spec.junk:
@@ -55,18 +54,27 @@ def rematched(spec: Any, scene: Any, variant: str, data_dir: str | Path, corpus:
         path, pair, ndisp = Path(data_dir) / spec.folder, (spec.left, spec.right), spec.ndisp
     else:
         return None
-    images = [read_image(path / f).permute(1, 2, 0).numpy()[..., ::-1].copy() for f in pair]  # BGR
     params = dataclasses.replace(SGBMParams(numDisparities=ndisp), **SGBM_VARIANTS[variant])
-    disp, valid = compute_disparity(images[0], images[1], params)
+    disp, valid = _matched(path, pair, params)
     return scene_from_arrays(disp, valid, image=scene.image, objects=scene.objects,
                              object_info=scene.object_info, camera=scene.camera,
                              name=f"{scene.name}+sgbm:{variant}")
 
 
-def _load(spec: Any, data_dir: Path) -> Any:
+def _matched(path: Path, pair: tuple[str, str], params: Any) -> tuple[Any, Any]:
+    """SGBM's ``(disparity, valid)`` of the stereo pair ``pair`` (left, right image files) under
+    ``path``, matched with ``params``."""
     from somtorch.disparity.io import read_image
+    from somtorch.disparity.stereo import compute_disparity
+
+    # (3, H, W) RGB uint8 → (H, W, 3) BGR, as OpenCV reads it
+    images = [read_image(path / f).permute(1, 2, 0).numpy()[..., ::-1].copy() for f in pair]
+    return compute_disparity(images[0], images[1], params)
+
+
+def _load(spec: Any, data_dir: Path) -> Any:
     from somtorch.disparity import load_scene, scene_from_arrays
-    from somtorch.disparity.stereo import SGBMParams, compute_disparity
+    from somtorch.disparity.stereo import SGBMParams
 
     path = data_dir / spec.folder
     if not path.is_dir():
@@ -80,13 +88,9 @@ def _load(spec: Any, data_dir: Path) -> Any:
         scene.name = spec.name
         return scene
     gt = load_scene(path)
-    images = []
-    for f in (spec.left, spec.right):
-        if f is None:
-            raise ValueError(f"scene {spec.name!r}: disparity 'sgbm' needs left and right image files")
-        im = read_image(path / f)  # (3, H, W) RGB uint8
-        images.append(im.permute(1, 2, 0).numpy()[..., ::-1].copy())  # BGR, as OpenCV reads it
-    disp, valid = compute_disparity(images[0], images[1], SGBMParams(numDisparities=spec.ndisp))
+    if spec.left is None or spec.right is None:
+        raise ValueError(f"scene {spec.name!r}: disparity 'sgbm' needs left and right image files")
+    disp, valid = _matched(path, (spec.left, spec.right), SGBMParams(numDisparities=spec.ndisp))
     return scene_from_arrays(disp, valid, image=gt.image, objects=gt.objects, object_info=gt.object_info,
                              camera=gt.camera, name=spec.name)
 
