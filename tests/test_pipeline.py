@@ -251,7 +251,7 @@ def _floor_with_boxes(noise: float) -> tuple:
 
 def test_a_noisy_map_is_read_through_the_median_and_a_clean_one_as_given():
     """features.median: only a map whose per-pixel noise sets the ground band is filtered (a dense
-    sensor's 0.5 px here; σ ≤ 0.1 px on every stereo and GT map of the corpus); the caller's scene
+    sensor's 0.5 px here; σ ≤ 0.14 px on every stereo and GT map of the corpus); the caller's scene
     is left as it was."""
     from dataclasses import replace
 
@@ -278,6 +278,29 @@ def test_a_noisy_map_is_read_through_the_median_and_a_clean_one_as_given():
     assert denoised(clean, cfg) == (clean, 0)
     with pytest.raises(ValueError, match="odd window"):
         replace(cfg.features, median=4)
+
+
+def test_a_map_resampled_from_a_coarser_grid_reads_its_own_noise():
+    """A depth map registered to an image twice its size repeats each value over 2 × 2 pixels:
+    half of its neighbour differences are 0, and read one pixel apart the noise vanishes (the map
+    was read as given, its noise left to split the floor). Read two pixels apart as well, it is the
+    noise of the map it came from, and the map is read through the median."""
+    from somtorch.disparity.scene import scene_from_arrays
+    from somtorch.pipeline import read_map
+    from somtorch.tasks.ground import noise_sigma
+
+    ys, xs = torch.meshgrid(torch.arange(120.0), torch.arange(160.0), indexing="ij")
+    noise = 0.5 * torch.randn(120, 160, generator=torch.Generator().manual_seed(5))
+    coarse = 20.0 + 0.01 * xs + 0.05 * ys + noise
+    fine = coarse.repeat_interleave(2, 0).repeat_interleave(2, 1)
+    ones = torch.ones(240, 320, dtype=torch.bool)
+    both = ones[:, :-1] & ones[:, 1:]
+    lag1 = (fine[:, 1:] - fine[:, :-1])[both]
+    assert float((lag1 - lag1.median()).abs().median()) == 0.0  # what one pixel apart reads
+    assert noise_sigma(fine, ones) == pytest.approx(noise_sigma(coarse, ones[:120, :160]), rel=1e-6)
+    assert noise_sigma(coarse, ones[:120, :160]) == pytest.approx(0.5, rel=0.05)
+    _, window, _ = read_map(scene_from_arrays(fine, ones, name="registered"), PipelineConfig())
+    assert window >= 3
 
 
 def test_the_noise_is_measured_once_whether_the_map_is_filtered_or_not(monkeypatch):
@@ -310,8 +333,8 @@ def test_the_noise_is_measured_once_whether_the_map_is_filtered_or_not(monkeypat
 def test_a_filtered_map_s_ground_band_is_what_the_median_leaves_of_its_noise():
     """A dense sensor's floor with 0.8 px of noise, read through the 3 × 3 median (a 120-px side:
     the solidity square allows no wider one): each filtered pixel still errs by ~0.33 px, which
-    the filtered map's neighbour differences read as ~0.15 (neighbouring windows share most of
-    their pixels). The band takes the median's standard error of the measured noise, so the floor
+    the filtered map's pixel differences read as ~0.25 (windows one or two pixels apart share most
+    of their pixels). The band takes the median's standard error of the measured noise, so the floor
     stays one plane (with the neighbour reading alone a tenth of it was left as speckle; the plane's
     own spread now recovers that too)."""
     from somtorch.disparity.filters import median_noise
@@ -327,7 +350,7 @@ def test_a_filtered_map_s_ground_band_is_what_the_median_leaves_of_its_noise():
     read, window, sigma = read_map(scene, cfg)
     assert window == 3 and sigma == pytest.approx(median_noise(noise_sigma(noisy, scene.valid), 3))
     err = float((read.disparity - truth)[2:-2, 2:-2].std())  # the filtered map's per-pixel error
-    assert sigma == pytest.approx(err, rel=0.1) and noise_sigma(read.disparity, read.valid) < 0.6 * err
+    assert sigma == pytest.approx(err, rel=0.1) and noise_sigma(read.disparity, read.valid) < 0.8 * err
     plane = fit_ground_plane(read.disparity, read.valid, cfg.ground, sigma=sigma)
     assert plane.tol == pytest.approx(cfg.ground.noise_band * sigma) and plane.inlier_frac > 0.93
     # σ read off the filtered map sets no band above tol_px; the plane's own spread about it (the

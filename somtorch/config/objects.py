@@ -32,7 +32,7 @@ class GroundConfig(Validated):
             percentile) …
         tol_px: … but at least this many px …
         noise_band: … and at least this many times the map's per-pixel disparity error: its noise
-            (:func:`~somtorch.tasks.ground.noise_sigma`: ≤ 0.1 px on every stereo and GT map of the
+            (:func:`~somtorch.tasks.ground.noise_sigma`: ≤ 0.14 px on every stereo and GT map of the
             corpus, so the band there is the two above; a dense sensor's floor with 0.5 px of noise
             left a third of its pixels as speckle outside a 0.5 px band) and its rounding (a map
             stored in steps of q px, :func:`~somtorch.tasks.ground.quantum`, adds q²/12 to the

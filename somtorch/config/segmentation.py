@@ -36,9 +36,9 @@ class FeatureConfig(Validated):
             :func:`~somtorch.disparity.filters.median_filter`) by every step, ground plane included —
             or in a wider one where the noise the median leaves would still set the band
             (:func:`~somtorch.pipeline.denoised`: 5 × 5 for σ = 0.8 px, 7 × 7 for 1.1 px); 0 = never
-            (the paper's reading). σ ≤ 0.1 px on every stereo and GT map of the corpus:
+            (the paper's reading). σ ≤ 0.14 px on every stereo and GT map of the corpus:
             none of them is filtered (``docs/tuned_constants.md``). The outputs keep the map as given.
-            A map with less noise than the trigger (0.1–0.25 px: it would gain too) can be passed
+            A map with less noise than the trigger (0.14–0.25 px: it would gain too) can be passed
             through :func:`~somtorch.disparity.filters.median_filter` before the pipeline.
     """
 

@@ -131,8 +131,11 @@ def test_noise_sigma_measures_per_pixel_noise_and_ignores_gradients_and_edges():
     noisy = d + 0.5 * torch.randn(H, W, generator=g)
     assert abs(noise_sigma(noisy, valid) - 0.5) < 0.05
     stripes = valid.clone()
-    stripes[:, ::2] = False  # no two horizontal neighbours valid: nothing to measure
-    assert noise_sigma(noisy, stripes) == 0.0
+    stripes[:, ::2] = False  # no two horizontal neighbours valid: read two pixels apart
+    assert abs(noise_sigma(noisy, stripes) - 0.5) < 0.05
+    sparse = torch.zeros_like(valid)
+    sparse[:, ::3] = True  # no two valid pixels within two columns: nothing to measure
+    assert noise_sigma(noisy, sparse) == 0.0
 
 
 def test_the_band_widens_with_the_noise_of_a_dense_floor():
