@@ -8,8 +8,8 @@ import json
 import pytest
 import torch
 
-from somtorch.baselines.learned import (CheckpointMismatchError, RealDataError, check_synthetic, evaluate, fit, load,
-                                        prepare_input, save)
+from somtorch.baselines.learned import (CheckpointMismatchError, RealDataError, TrainingCollapsedError, check_alive,
+                                        check_synthetic, evaluate, fit, load, prepare_input, save)
 from somtorch.baselines.learned.data import prepare_target, tensor_hash
 from somtorch.config.learned import LearnedFitConfig, LearnedModelConfig
 from somtorch.tasks.baselines import get_task_baseline, learned_boxes
@@ -71,6 +71,20 @@ def test_a_tiny_run_learns_a_box_on_a_plane(trained):
         found = learned_boxes(d, v, model=trained)
         ious.append(box_iou(found[0].box, truth) if found else 0.0)
     assert sum(ious) / len(ious) > 0.9, ious
+
+
+def test_a_network_whose_positive_evidence_died_is_refused(trained):
+    """Too large a step kills the ReLU units the head weighs positively: no pixel's logit then
+    exceeds the head's bias, and the network marks every frame alike. check_alive refuses it (the
+    message names the fields to change); a network that learned passes."""
+    x, y, _ = tiny_set(32, seed=1)
+    check_alive(trained, x)
+    dead = fit(x, y, TINY, LearnedFitConfig(epochs=2, batch_size=8, lr=1.0, seed=0))
+    with torch.no_grad():
+        assert float(trained(x).max()) > float(trained.head.bias) + 1.0
+        assert float(dead(x).max()) <= float(dead.head.bias)  # what is refused, measured directly
+    with pytest.raises(TrainingCollapsedError, match=r"fit\.lr .*fit\.seed"):
+        check_alive(dead, x)
 
 
 def test_same_seed_same_weights_other_seed_other_weights():

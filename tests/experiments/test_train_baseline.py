@@ -58,6 +58,13 @@ def test_trains_saves_and_then_reuses_the_model(tmp_path):
     assert sidecar.with_suffix(".safetensors").read_bytes() == weights  # reused, not retrained
 
 
+def test_a_collapsed_network_is_a_one_line_error_and_is_not_cached(tmp_path):
+    proc = _run(tmp_path, *TINY, "fit.lr=10.0", "fit.epochs=3")
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert "above its output bias" in proc.stderr and "fit.lr" in proc.stderr, proc.stderr[-3000:]
+    assert not any((tmp_path / "cache").rglob("*.safetensors"))
+
+
 def test_frames_carry_the_camera_of_their_fold():
     from experiments.datasets import datasets
 

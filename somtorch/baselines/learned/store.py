@@ -27,7 +27,7 @@ import torch
 from somtorch.baselines.learned import checkpoint
 from somtorch.baselines.learned.data import PREP_VERSION, build_tensors
 from somtorch.baselines.learned.model import UNet, parameter_count
-from somtorch.baselines.learned.train import evaluate, fit
+from somtorch.baselines.learned.train import check_alive, evaluate, fit
 from somtorch.config.learned import LearnedDataConfig, LearnedFitConfig, LearnedModelConfig
 
 __all__ = ["cache_root", "model_key", "model_path", "train_or_load", "trained_model"]
@@ -96,6 +96,7 @@ def train_or_load(model_cfg: LearnedModelConfig, data_cfg: LearnedDataConfig, fi
     t1 = time.perf_counter()
     model = fit(data.inputs[train], data.targets[train], model_cfg, fit_cfg, progress=progress, log=log)
     t_fit = time.perf_counter() - t1
+    check_alive(model, data.inputs[data.held_out])  # a collapsed network is never cached
     held = evaluate(model, data.inputs[data.held_out], data.targets[data.held_out])
     meta = {"data": data_cfg.as_dict(), "fit": fit_cfg.as_dict(), "parameters": parameter_count(model),
             "train_frames": int(train.sum()), "held_out_metrics": held, "prepare_s": round(t_data, 1),

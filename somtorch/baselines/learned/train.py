@@ -9,6 +9,8 @@ seed and thread count give the same weights, bit for bit.
 :func:`evaluate` scores a model on prepared frames at the network's size: the mask IoU with the
 main object, the IoU of the best box with the main object's box, and the share of frames whose best
 box holds at least 95 % of the main object's pixels (the "identified" rule of the scoring).
+:func:`check_alive` refuses a network whose positive evidence died in training (no held-out pixel
+above its output bias): it would mark every frame alike.
 
 :func:`estimate` predicts the time and memory of a training run from sizes alone (before any work).
 """
@@ -26,9 +28,9 @@ import torch.nn.functional as F
 from somtorch.baselines.learned.model import UNet
 from somtorch.baselines.learned.predict import mask_parts
 from somtorch.config.learned import LearnedFitConfig, LearnedModelConfig
-from somtorch.validation import check_tensor
+from somtorch.validation import SomtorchError, check_tensor
 
-__all__ = ["TrainEstimate", "estimate", "evaluate", "fit", "forward_macs"]
+__all__ = ["TrainEstimate", "TrainingCollapsedError", "check_alive", "estimate", "evaluate", "fit", "forward_macs"]
 
 # Seconds per multiply-accumulate of one training step (forward + backward + AdamW), per frame, on
 # one 2-core development CPU with both threads; fitted under a load average of ~7 (measured
@@ -128,6 +130,37 @@ def fit(inputs: torch.Tensor, targets: torch.Tensor, model_cfg: LearnedModelConf
                 step += 1
         bar.close()
     return model.eval()
+
+
+class TrainingCollapsedError(SomtorchError, RuntimeError):
+    """A trained network that raises no pixel above its output bias (see :func:`check_alive`)."""
+
+
+@torch.no_grad()
+def check_alive(model: UNet, inputs: torch.Tensor, *, batch_size: int = 32) -> None:
+    """Raise unless some pixel of ``inputs`` gets a logit above the head's bias.
+
+    The head weighs the last block's ReLU features; where every feature it weighs positively is 0 on
+    every frame (dead units: at ``fit.lr`` 3e-3 three of the four default models of session 24),
+    no pixel gets any evidence for the object, the probability never exceeds sigmoid(bias), and the
+    network marks every frame alike whatever it shows (its "mask" is the threshold's side of that
+    bias). Such a model is refused before it is saved: its scores would be the bias's, not a
+    network's.
+
+    Raises:
+        TrainingCollapsedError: names the fields that change the run (``fit.lr``, ``fit.seed``).
+
+    Shape:
+        inputs :math:`(N, C, h, w)`: prepared frames (the held-out ones).
+    """
+    model.eval()
+    top = max(float(model(inputs[i:i + batch_size]).max()) for i in range(0, len(inputs), batch_size))
+    bias = float(model.head.bias.max())
+    if top <= bias:
+        raise TrainingCollapsedError(
+            f"the trained network raises none of the {len(inputs)} held-out frames' pixels above its output "
+            f"bias ({bias:.3f}): its positive evidence died in training and it marks every frame alike; "
+            "nothing was saved. Train again with a lower fit.lr or another fit.seed")
 
 
 def _box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
