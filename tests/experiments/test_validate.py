@@ -373,8 +373,9 @@ def test_blotch_junk_adds_noise_correlated_over_several_pixels():
     out = add_junk(scene, "blotch:0.5", seed=2)
     step = (out.disparity - scene.disparity)[out.valid]
     assert abs(float(step.std()) - 0.5) < 0.1
-    # neighbours share most of their error: the neighbour reading sees a fraction of it
-    assert noise_sigma(out.disparity - scene.disparity, out.valid) < 0.25
+    # pixels one and two apart share much of their error (1.2 px of correlation on this 60-px-high
+    # toy): the reading sees a fraction of it
+    assert noise_sigma(out.disparity - scene.disparity, out.valid) < 0.8 * 0.5
     assert torch.equal(out.disparity, add_junk(scene, "blotch:0.5", seed=2).disparity)  # seeded
     assert not bool((out.valid & ~scene.valid).any()) and out.name == "toy+blotch:0.5"
 
