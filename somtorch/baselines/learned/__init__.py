@@ -25,6 +25,7 @@ from somtorch.baselines.learned.predict import Part, mask_parts, predict_parts, 
 from somtorch.baselines.learned.store import model_path, train_or_load, trained_model
 from somtorch.baselines.learned.train import TrainingCollapsedError, check_alive, estimate, evaluate, fit
 
-__all__ = ["CheckpointMismatchError", "Part", "RealDataError", "TrainingCollapsedError", "UNet", "build_tensors",
-           "check_alive", "check_synthetic", "estimate", "evaluate", "fit", "load", "mask_parts", "model_path", "parameter_count", "predict_parts",
-           "predict_proba", "prepare_input", "save", "train_or_load", "trained_model"]
+__all__ = ["CheckpointMismatchError", "Part", "RealDataError", "TrainingCollapsedError", "UNet",
+           "build_tensors", "check_alive", "check_synthetic", "estimate", "evaluate", "fit", "load",
+           "mask_parts", "model_path", "parameter_count", "predict_parts", "predict_proba", "prepare_input",
+           "save", "train_or_load", "trained_model"]

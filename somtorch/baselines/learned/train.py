@@ -30,7 +30,8 @@ from somtorch.baselines.learned.predict import mask_parts
 from somtorch.config.learned import LearnedFitConfig, LearnedModelConfig
 from somtorch.validation import SomtorchError, check_tensor
 
-__all__ = ["TrainEstimate", "TrainingCollapsedError", "check_alive", "estimate", "evaluate", "fit", "forward_macs"]
+__all__ = ["TrainEstimate", "TrainingCollapsedError", "check_alive", "estimate", "evaluate", "fit",
+           "forward_macs"]
 
 # Seconds per multiply-accumulate of one training step (forward + backward + AdamW), per frame, on
 # one 2-core development CPU with both threads; fitted under a load average of ~7 (measured
