@@ -37,7 +37,7 @@ def rematched(spec: Any, scene: Any, variant: str, data_dir: str | Path, corpus:
     ``spec.right`` under ``data_dir``."""
     import dataclasses
 
-    from somtorch.disparity import scene_from_arrays
+    from somtorch.disparity import parse_middlebury_calib, scene_from_arrays
     from somtorch.disparity.stereo import SGBMParams
 
     check_junk_kind(f"sgbm:{variant}")
@@ -47,9 +47,7 @@ def rematched(spec: Any, scene: Any, variant: str, data_dir: str | Path, corpus:
         from .datasets import corpus_dir
 
         path = Path(corpus or corpus_dir()) / spec.folder
-        pair = ("im0.png", "im1.png")
-        calib = dict(line.split("=", 1) for line in (path / "calib.txt").read_text().split() if "=" in line)
-        ndisp = int(calib["ndisp"])
+        pair, ndisp = ("im0.png", "im1.png"), int(parse_middlebury_calib(path / "calib.txt")["ndisp"])
     elif not spec.synthetic and spec.disparity == "sgbm":
         path, pair, ndisp = Path(data_dir) / spec.folder, (spec.left, spec.right), spec.ndisp
     else:
