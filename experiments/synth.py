@@ -4,7 +4,9 @@ Writes ``n`` frames (seeds ``start .. start + n - 1``) per family x camera into
 ``<cache>/<family>_<camera>/<seed:05d>/`` (the Middlebury layout ``load_scene`` reads; see
 ``docs/synth.md``), skipping frames that are present and made by this generator version (the
 ``manifest.json`` of each data set lists the frames and the generator's hash). One frame per task on
-``workers`` processes, each on one thread.
+``workers`` processes, each on one thread. Last, it prints the corpus digest: one hash over the bytes of
+every requested frame (each frame's own digest is its manifest entry's ``digest``), so that two
+machines can check that they render the same corpus without copying it.
 
     python -m experiments.synth 'families=[stairs,garden]' 'cameras=[oakd]' n=50
     python -m experiments.synth 'cameras=[oakd,kitti,middlebury]' n=40 workers=2
@@ -42,15 +44,52 @@ def _init_worker() -> None:
     cv2.setNumThreads(1)
 
 
+def frame_digest(folder: str | Path) -> str:
+    """16 hex digits of SHA-256 over a written frame's files (name and bytes, sorted by name;
+    ``objects.json`` without its ``generator`` hash, which names the code, not the frame): two
+    machines that render a seed into the same bytes give the same digest, so corpora can be compared
+    without copying them.
+
+    Raises:
+        FileNotFoundError: ``folder`` holds no generated frame (no ``disp0GT.pfm``).
+    """
+    import hashlib
+    import json
+
+    folder = Path(folder)
+    if not (folder / "disp0GT.pfm").is_file():
+        raise FileNotFoundError(f"{folder}: no generated frame (disp0GT.pfm missing)")
+    h = hashlib.sha256()
+    for f in sorted(p for p in folder.iterdir() if p.is_file()):
+        data = f.read_bytes()
+        if f.name == "objects.json":
+            doc = json.loads(data)
+            doc.pop("generator", None)
+            data = json.dumps(doc, sort_keys=True).encode()
+        h.update(f.name.encode() + b"\0" + data + b"\0")
+    return h.hexdigest()[:16]
+
+
+def corpus_digest(digests: dict[str, str]) -> str:
+    """16 hex digits of SHA-256 over ``{"<dataset>/<seed:05d>": frame digest}``, in sorted order."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for key in sorted(digests):
+        h.update(f"{key} {digests[key]}\n".encode())
+    return h.hexdigest()[:16]
+
+
 def _make(family: str, camera: str, seed: int, scale: float, root: str) -> dict:
-    """Generate and write one frame; its manifest entry (with the seconds it took)."""
+    """Generate and write one frame; its manifest entry (with its digest and the seconds it took)."""
     from somtorch.synth.frame import generate_frame
     from somtorch.synth.store import frame_dir, manifest_entry, write_frame
 
     t0, c0 = time.perf_counter(), time.process_time()
     frame = generate_frame(family, seed, camera, scale=scale)
-    write_frame(frame, frame_dir(family, camera, seed, scale, root))
-    return {**manifest_entry(frame), "wall_s": round(time.perf_counter() - t0, 3),
+    folder = write_frame(frame, frame_dir(family, camera, seed, scale, root))
+    return {**manifest_entry(frame), "digest": frame_digest(folder),
+            "wall_s": round(time.perf_counter() - t0, 3),
             "cpu_s": round(time.process_time() - c0, 3)}
 
 
@@ -93,12 +132,27 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
                 manifests[(fam, cam)][f"{s:05d}"] = entry
                 write_manifest(dataset_dir(fam, cam, cfg.scale, root), manifests[(fam, cam)])
     wall = time.perf_counter() - t0
+    # the bytes of every requested frame, one digest (a frame cached before digests were recorded
+    # gets its digest from its files now)
+    digests = {}
+    for (fam, cam), frames in manifests.items():
+        ds, dirty = dataset_dir(fam, cam, cfg.scale, root), False
+        for s in range(cfg.start, cfg.start + cfg.n):
+            entry = frames[f"{s:05d}"]
+            if "digest" not in entry:
+                entry["digest"], dirty = frame_digest(ds / f"{s:05d}"), True
+            digests[f"{ds.name}/{s:05d}"] = entry["digest"]
+        if dirty:
+            write_manifest(ds, frames)
     summary = {"root": root, "generated": len(todo), "present": total - len(todo), "wall_s": round(wall, 1),
+               "digest": corpus_digest(digests),
                "frames_per_min": round(60 * len(todo) / wall, 1) if todo else None,
                # per camera: mean seconds of one frame in a worker, wall clock and CPU (one thread)
                "wall_s_per_frame": {c: round(sum(w for w, _ in v) / len(v), 3) for c, v in seconds.items()},
                "cpu_s_per_frame": {c: round(sum(u for _, u in v) / len(v), 3) for c, v in seconds.items()}}
     log.info("%s", summary)
+    log.info("corpus digest %s over %d frames (the same on another machine: the same bytes; per frame: each "
+             "manifest.json's \"digest\")", summary["digest"], len(digests))
     return summary
 
 

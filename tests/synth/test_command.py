@@ -39,6 +39,33 @@ def test_the_command_writes_frames_once_and_lists_them_in_the_manifest(tmp_path)
     assert (tmp_path / "room_oakd_x0.25" / "00001" / "disp0GT.pfm").is_file()
     again = generate(cfg, progress=False)
     assert again["generated"] == 0 and again["present"] == 4
+    # the bytes of the four frames, one digest: the same when nothing was rendered again
+    assert again["digest"] == first["digest"] and len(first["digest"]) == 16
+
+
+def test_the_corpus_digest_covers_every_frame_and_is_filled_in_for_old_manifests(tmp_path):
+    from experiments.synth import generate
+    from experiments.synth import corpus_digest, frame_digest
+
+    cfg = SynthConfig(families=["fence"], cameras=["oakd"], n=2, scale=0.25, workers=1, cache=str(tmp_path))
+    first = generate(cfg, progress=False)
+    ds = tmp_path / "fence_oakd_x0.25"
+    manifest = json.loads((ds / "manifest.json").read_text())
+    digests = {f"fence_oakd_x0.25/{s}": e["digest"] for s, e in manifest["frames"].items()}
+    assert first["digest"] == corpus_digest(digests)
+    assert digests["fence_oakd_x0.25/00001"] == frame_digest(ds / "00001")
+    # a manifest written before digests were recorded: the digest is read from the files and saved
+    for e in manifest["frames"].values():
+        del e["digest"]
+    (ds / "manifest.json").write_text(json.dumps(manifest))
+    assert generate(cfg, progress=False)["digest"] == first["digest"]
+    assert "digest" in json.loads((ds / "manifest.json").read_text())["frames"]["00000"]
+    # one changed byte in one frame changes the corpus digest
+    pfm = ds / "00000" / "disp0GT.pfm"
+    raw = bytearray(pfm.read_bytes())
+    raw[-1] ^= 1
+    pfm.write_bytes(bytes(raw))
+    assert corpus_digest({**digests, "fence_oakd_x0.25/00000": frame_digest(ds / "00000")}) != first["digest"]
 
 
 def test_help_lists_the_command_keys(capsys):

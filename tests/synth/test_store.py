@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import math
 
+import pytest
 import torch
 
 from somtorch.disparity import load_scene
 from somtorch.synth import ensure_frame, generate_frame, load_frame, write_frame
+from experiments.synth import frame_digest
 from somtorch.synth.store import dataset_dir, generator_version, read_manifest
 
 
@@ -39,8 +41,12 @@ def test_written_bytes_are_identical_and_folders_complete(tmp_path):
     assert names == sorted(["calib.txt", "disp0GT.pfm", "disp_sgbm.pfm", "im0.png", "im1.png", "objects.json",
                             "objects.png"])
     assert all((a / n).read_bytes() == (b / n).read_bytes() for n in names)
+    assert frame_digest(a) == frame_digest(b)
     write_frame(generate_frame("hands", 2, "oakd", scale=0.25), a)  # replaces the old folder
     assert (a / "im0.png").read_bytes() != (b / "im0.png").read_bytes()
+    assert frame_digest(a) != frame_digest(b)
+    with pytest.raises(FileNotFoundError, match="no generated frame"):
+        frame_digest(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "b"]  # no temporary left behind
 
 

@@ -34,10 +34,11 @@ __all__ = ["TrainEstimate", "TrainingCollapsedError", "check_alive", "estimate",
            "forward_macs"]
 
 # Seconds per multiply-accumulate of one training step (forward + backward + AdamW), per frame, on
-# one 2-core development CPU with both threads; fitted under a load average of ~7 (measured
-# 0.25 s per 64 x 96 frame of the default network, whose forward pass is ~0.17 GMAC), divided by
-# 3 for an idle machine. Typical, not a bound: it refuses the absurd, not the merely long.
-_T_MAC_TRAIN = 0.25 / 0.17e9 / 3
+# one 2-core development CPU with both threads, idle: the default network (~0.25 GMAC a forward
+# pass at 64 x 96) trained 768 frames x 9 epochs in 92.8 s (13.4 ms a frame and epoch; session 25).
+# Until session 25 it was 9 x larger (fitted under a load average of ~7), so the 15-minute budget
+# refused runs of two minutes. Typical, not a bound: a loaded machine takes longer.
+_T_MAC_TRAIN = 13.4e-3 / 0.25e9
 _T_MAC_EVAL = _T_MAC_TRAIN / 3
 _T_FRAME_PREP = 0.02  # reading and preparing one cached frame
 _ACT_FACTOR = 8  # activations held for the backward pass: ~8 floats per output element of a convolution
