@@ -69,7 +69,7 @@ def plan(cfg: TrainBaselineConfig, corpus: str) -> tuple[list, list[tuple[str, s
     from somtorch.synth.store import dataset_dir, is_current, read_manifest
 
     runs = _runs(cfg)
-    todo, manifests, seconds, peak = set(), {}, 0.0, 0
+    todo, manifests, seconds, peak, n_cached = set(), {}, 0.0, 0, 0
     for data in runs:
         refs = synthetic_frames(data)  # checks the family and camera names
         for r in refs:
@@ -79,6 +79,7 @@ def plan(cfg: TrainBaselineConfig, corpus: str) -> tuple[list, list[tuple[str, s
             if not is_current(ds, r.seed, manifests[ds]):
                 todo.add((r.family, r.camera, r.seed))
         cached = model_path(cfg.model, data, cfg.fit, cfg.cache).is_file() and not cfg.retrain
+        n_cached += cached
         n_held = sum(r.held_out for r in refs)
         est = estimate(cfg.model, cfg.fit, train_frames=0 if cached else len(refs) - n_held,
                        held_out_frames=0 if cached else n_held)
@@ -88,7 +89,8 @@ def plan(cfg: TrainBaselineConfig, corpus: str) -> tuple[list, list[tuple[str, s
                       workers=cfg.workers).render_s
     seconds += render
     avail, source = available_memory()
-    what = (f"{len(runs)} model(s), {len(todo)} frame(s) to render: ~{fmt_seconds(seconds)} on 2 idle cores "
+    models = f"{len(runs)} model(s)" + (f" ({n_cached} cached)" if n_cached else "")
+    what = (f"{models}, {len(todo)} frame(s) to render: ~{fmt_seconds(seconds)} on 2 idle cores "
             f"(rendering {fmt_seconds(render)}), ~{fmt_bytes(peak)} peak")
     if seconds > 60 * cfg.budget_minutes:
         raise ResourceError(f"training the learned baseline would take {what}; over budget_minutes={cfg.budget_minutes:g}: "
