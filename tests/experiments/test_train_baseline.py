@@ -54,7 +54,8 @@ def test_trains_saves_and_then_reuses_the_model(tmp_path):
     assert any((sidecar.parent / "tb").iterdir())
     weights = sidecar.with_suffix(".safetensors").read_bytes()
     again = _run(tmp_path, *TINY)
-    assert again.returncode == 0 and "1 model(s) (1 cached), 0 frame(s) to render" in again.stdout, again.stderr[-3000:]
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert "1 model(s) (1 cached), 0 frame(s) to render" in again.stdout
     assert sidecar.with_suffix(".safetensors").read_bytes() == weights  # reused, not retrained
 
 
