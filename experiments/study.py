@@ -107,6 +107,19 @@ def complete_metrics(path: Path, chash: str) -> dict | None:
     return m
 
 
+def job_hash(cfg: StudyConfig, config: dict[str, Any]) -> str:
+    """The job's config hash: of ``config``, and for a trained task baseline also of the model it
+    scores (its registry entry's ``identity``), so that a study re-runs a learned baseline's job
+    after the model changed instead of skipping it as complete."""
+    if cfg.task_baseline is not None:
+        from somtorch.tasks.baselines import get_task_baseline
+
+        identity = get_task_baseline(cfg.task_baseline).identity
+        if identity is not None:
+            return config_hash({**config, "task_baseline_model": identity()})
+    return config_hash(config)
+
+
 def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str, Any]:
     """Run one study job into ``out_dir`` (see the module docstring); returns its metrics.
 
@@ -129,7 +142,7 @@ def _execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[st
     from somtorch.outputs import train_strides, write_maps
     from somtorch.pipeline import fallback_summary, run_pipeline
 
-    chash = config_hash(config)
+    chash = job_hash(cfg, config)
     if cfg.skip_complete:
         done = complete_metrics(out_dir, chash)
         if done is not None:

@@ -263,6 +263,27 @@ def test_task_baselines_get_their_rows_in_tables_1_and_2(tmp_path, shared_data):
     assert "| all px | kitti2015 | uv_disparity |" in (tmp_path / "agg" / "table2.md").read_text()
 
 
+def test_a_trained_baselines_job_hash_names_its_model():
+    from experiments.metrics_schema import config_hash
+    from experiments.study import StudyConfig, job_hash
+    from somtorch.baselines.learned.store import model_key
+    from somtorch.config.learned import LearnedDataConfig, LearnedFitConfig, LearnedModelConfig
+    from somtorch.tasks.baselines import get_task_baseline
+
+    config = {"data": {"name": "kitti2015"}, "task_baseline": "learned"}
+    key = model_key(LearnedModelConfig(), LearnedDataConfig(), LearnedFitConfig())
+    assert get_task_baseline("learned").identity() == key
+    learned = job_hash(StudyConfig(task_baseline="learned"), config)
+    assert learned == config_hash({**config, "task_baseline_model": key}) != config_hash(config)
+    # another model (another training config) is another job: a study runs it again, not skips it
+    other = model_key(LearnedModelConfig(), LearnedDataConfig(frames=3), LearnedFitConfig())
+    assert config_hash({**config, "task_baseline_model": other}) != learned
+    # a baseline that is its code keeps the plain hash: studies scored before stay complete
+    plain = {**config, "task_baseline": "plane_components"}
+    assert job_hash(StudyConfig(task_baseline="plane_components"), plain) == config_hash(plain)
+    assert job_hash(StudyConfig(), config) == config_hash(config)
+
+
 def test_optuna_sweeper_searches_and_reports_the_best_trade_off(tmp_path, shared_data):
     _study(tmp_path, "+experiment=optuna", "data=kitti2015", "ensemble=2", "train.epochs=3",
            "hydra.sweeper.n_trials=3", f"paths.data_dir={shared_data}")

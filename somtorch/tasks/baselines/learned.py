@@ -18,7 +18,7 @@ import torch
 
 from somtorch.baselines.learned.model import UNet
 from somtorch.baselines.learned.predict import predict_parts
-from somtorch.baselines.learned.store import trained_model
+from somtorch.baselines.learned.store import model_key, trained_model
 from somtorch.config.learned import LearnedDataConfig, LearnedFitConfig, LearnedModelConfig
 
 from .registry import Obstacle, map_arrays, register_task_baseline
@@ -77,4 +77,10 @@ def _fold(camera: str) -> LearnedBoxes:
     return _FOLDS[camera]
 
 
-register_task_baseline("learned", LearnedBoxes(), deterministic=True, left_out=_fold)
+def _model_key() -> str:
+    """The key of the model the default configs train
+    (:func:`~somtorch.baselines.learned.store.model_key`)."""
+    return model_key(LearnedModelConfig(), LearnedDataConfig(), LearnedFitConfig())
+
+
+register_task_baseline("learned", LearnedBoxes(), deterministic=True, left_out=_fold, identity=_model_key)

@@ -73,6 +73,9 @@ class TaskBaseline:
         left_out: for a trained baseline, ``left_out(camera) -> fn``: the function of the model
             trained without that generator camera's frames (the leave-one-dataset-out fold of a
             dataset taken with it); None for a baseline that learns nothing.
+        identity: for a trained baseline, ``identity() -> str``: what its function is now (the key
+            of the model it loads), part of a study job's config hash so that a job scored with
+            another model is run again, not skipped; None for a baseline that is its code.
     """
 
     name: str
@@ -80,6 +83,7 @@ class TaskBaseline:
     needs_camera: bool = False
     deterministic: bool = True
     left_out: Callable[[str], BaselineFn] | None = None
+    identity: Callable[[], str] | None = None
 
     def without(self, camera: str | None) -> TaskBaseline:
         """The baseline of the fold that leaves out ``camera``'s frames (itself when it learns
@@ -112,7 +116,8 @@ TASK_BASELINES: dict[str, TaskBaseline] = {}
 
 def register_task_baseline(name: str, fn: BaselineFn, *, needs_camera: bool = False,
                            deterministic: bool = True,
-                           left_out: Callable[[str], BaselineFn] | None = None) -> TaskBaseline:
+                           left_out: Callable[[str], BaselineFn] | None = None,
+                           identity: Callable[[], str] | None = None) -> TaskBaseline:
     """Register ``fn`` as the task baseline ``name`` (see the module docstring); returns its entry.
 
     Raises:
@@ -124,7 +129,7 @@ def register_task_baseline(name: str, fn: BaselineFn, *, needs_camera: bool = Fa
     old = TASK_BASELINES.get(name)
     if old is not None and old.fn is not fn:
         raise ValueError(f"task baseline {name!r} is already registered (by {old.fn.__module__}.{old.fn.__qualname__})")
-    entry = TaskBaseline(name, fn, bool(needs_camera), bool(deterministic), left_out)
+    entry = TaskBaseline(name, fn, bool(needs_camera), bool(deterministic), left_out, identity)
     TASK_BASELINES[name] = entry
     return entry
 
