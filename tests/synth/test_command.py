@@ -44,8 +44,7 @@ def test_the_command_writes_frames_once_and_lists_them_in_the_manifest(tmp_path)
 
 
 def test_the_corpus_digest_covers_every_frame_and_is_filled_in_for_old_manifests(tmp_path):
-    from experiments.synth import generate
-    from experiments.synth import corpus_digest, frame_digest
+    from experiments.synth import corpus_digest, frame_digest, generate
 
     cfg = SynthConfig(families=["fence"], cameras=["oakd"], n=2, scale=0.25, workers=1, cache=str(tmp_path))
     first = generate(cfg, progress=False)

@@ -7,9 +7,9 @@ import math
 import pytest
 import torch
 
+from experiments.synth import frame_digest
 from somtorch.disparity import load_scene
 from somtorch.synth import ensure_frame, generate_frame, load_frame, write_frame
-from experiments.synth import frame_digest
 from somtorch.synth.store import dataset_dir, generator_version, read_manifest
 
 
