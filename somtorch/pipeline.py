@@ -271,7 +271,7 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
     with timer("objects"):  # every member segments the same pixels: one context for all
         disp, valid, labels, g, ocfg = _strided(scene, seg.labels, ground,
                                                 replace(cfg.objects, map_stride=st))
-        ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg)
+        ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg, cfg.reduction, st)
         integral = ctx.integral if st == 1 else valid_integral(scene.valid)  # the reduction's: full size
     obj_mask, x_opt = None, None
     if scene.objects is not None:

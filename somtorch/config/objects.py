@@ -133,10 +133,11 @@ class AreaConfig(Validated):
         size_power: weight of the area's size in the ranking (0 = contrast alone; not used on a
             support-verified map, ranked by size × nearness).
         max_areas: how many areas are kept at most.
-        keep_budget: a further area is kept only if the union of the kept boxes then holds at most
-            this share of the valid pixels (the data-reduction budget: every salient area that
-            fits is kept, one that would make the reduction too small is skipped; the first area
-            is always kept). 1 = no budget.
+        keep_budget: a further area is kept only if the union of the kept boxes, each with the
+            reduction's margins (what the reduced map keeps), then holds at most this share of the
+            valid pixels (the data-reduction budget: every salient area that fits is kept, one that
+            would make the reduction too small is skipped; the first area is always kept). 1 = no
+            budget.
 
     Refinement — from a selected area to its kept box:
         merge: join the image-adjacent segments whose mean disparity is within ``merge ×`` the
@@ -190,4 +191,4 @@ class AreaConfig(Validated):
     min_solidity: float = 0.25
     solidity_size: float = 0.02
     max_areas: int = 4
-    keep_budget: float = 0.3
+    keep_budget: float = 0.35

@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from ..config import AreaConfig
+from ..config import AreaConfig, ReductionConfig
 from ..config.objects import CONTINUOUS_SHARE
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
@@ -55,6 +55,9 @@ class MapContext:
             ground and invalid gaps wider than the solidity square separate them) ``(H, W)`` long;
             None under ``paper``. An area spread over several is split (:func:`kept_areas`).
         n_islands: the number of labels of ``islands`` (0 where it is None).
+        margins: the reduction's margins ``(px, share of the box side, share of the image diagonal)``
+            on this map (:func:`~somtorch.tasks.reduction.reduce_map`): the keep budget counts each
+            box as the reduced map will keep it.
     """
 
     disparity: torch.Tensor
@@ -70,11 +73,15 @@ class MapContext:
     continuity: torch.Tensor | None = None
     uncut: torch.Tensor | None = None
     n_islands: int = 0
+    margins: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @classmethod
     def build(cls, disparity: torch.Tensor, valid: torch.Tensor, segmented: torch.Tensor,
-              ground: GroundPlane | None, cfg: AreaConfig) -> MapContext:
-        """The context of a map whose ``segmented`` ``(H, W)`` pixels carry a label (``labels >= 0``)."""
+              ground: GroundPlane | None, cfg: AreaConfig, reduction: ReductionConfig | None = None,
+              stride: int = 1) -> MapContext:
+        """The context of a map whose ``segmented`` ``(H, W)`` pixels carry a label (``labels >= 0``);
+        ``reduction``: the margins of the boxes kept (None = the defaults), on a map read every
+        ``stride``-th pixel (a margin in px shrinks with it; the shares do not)."""
         h, w = disparity.shape
         residual, band = None, 0.0
         if ground is not None and cfg.ground_clutter > 0:
@@ -86,9 +93,11 @@ class MapContext:
             islands, continuity = _islands(segmented), pair_continuity(disparity)
         uncut = None if cfg.rule == "paper" else _regions(segmented, valid,
                                                           solidity_square(disparity.shape, cfg.solidity_size))
+        r = reduction or ReductionConfig()
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
                    map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity),
-                   islands, continuity, uncut, 0 if islands is None else int(islands.max()) + 1)
+                   islands, continuity, uncut, 0 if islands is None else int(islands.max()) + 1,
+                   (r.tolerance_px / stride, r.tolerance_frac, r.tolerance_image))
 
 
 def object_mode(ground: GroundPlane | None, cfg: AreaConfig) -> tuple[str, str]:
@@ -256,18 +265,18 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
                ctx: MapContext) -> list[ObjectArea]:
     """Select, join, refine and check the candidates in rank order.
 
-    Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with
-    segments of an area kept before it) and, where the cut ground or a wide invalid gap separates
-    its pixels, split into parts (``ctx.uncut``; :func:`_parts`), each then treated as a candidate
-    of its own: its box refined (:func:`refine_box`), and kept if its
-    :func:`box_purity` reaches ``cfg.min_purity`` and its segments' solidity reaches
-    ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a dense map's standard). After
-    the first kept area, a further one must, with ``cfg.keep_budget < 1``, leave the union of the
-    kept boxes within that share of the valid pixels (else it is skipped and the next candidate
-    tried). At most ``cfg.max_areas`` areas are kept (the parts of one count once), out of the
-    ``cfg.max_areas`` best-ranked candidates (a failed check leaves room for the next of them). If
-    none passed: nothing under the ``salient`` rule (the caller keeps the whole map), the paper rule's nearest
-    area under ``rule="paper"`` (the paper always keeps it).
+    Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with segments of
+    an area kept before it) and, where the cut ground or a wide invalid gap separates its pixels, split
+    into parts (``ctx.uncut``; :func:`_parts`), each then treated as a candidate of its own: its box
+    refined (:func:`refine_box`), and kept if its :func:`box_purity` reaches ``cfg.min_purity`` and its
+    segments' solidity reaches ``cfg.min_solidity ×`` the map's (so a sparse map is not held to a dense
+    map's standard). After the first kept area, a further one must, with ``cfg.keep_budget < 1``, leave
+    the union of the kept boxes, each with the reduction's margins (``ctx.margins``: what the reduced
+    map keeps), within that share of the valid pixels (else it is skipped and the next candidate tried).
+    At most ``cfg.max_areas`` areas are kept (the parts of one count once), out of the ``cfg.max_areas``
+    best-ranked candidates (a failed check leaves room for the next of them). If none passed: nothing
+    under the ``salient`` rule (the caller keeps the whole map), the paper rule's nearest area under
+    ``rule="paper"`` (the paper always keeps it).
 
     Every kept area carries its ``purity``, ``solidity`` (the opened share of its pixels, ≤ 1),
     ``solidity_rel`` (that share over the map's own, which may exceed 1: the area is more solid than
@@ -303,8 +312,9 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             if done.purity < cfg.min_purity or done.solidity_rel < cfg.min_solidity:
                 continue
             if kept and cfg.keep_budget < 1:
-                union = reduce_map([a.box for a in kept] + [done.box], ctx.valid, tolerance_px=0.0,
-                                   tolerance_frac=0.0, tolerance_image=0.0, integral=ctx.integral)
+                m_px, m_frac, m_image = ctx.margins
+                union = reduce_map([a.box for a in kept] + [done.box], ctx.valid, tolerance_px=m_px,
+                                   tolerance_frac=m_frac, tolerance_image=m_image, integral=ctx.integral)
                 if union.kept_union > cfg.keep_budget * max(union.valid_total, 1):
                     continue  # it would not fit the reduction budget; a smaller one may
             kept.append(done)

@@ -300,3 +300,31 @@ def test_kept_areas_reads_each_candidates_window_with_the_whole_maps_result():
     assert _opened_share(label_mask(labels[y0:y1 + 1, x0:x1 + 1], [0]), square) > line.solidity
     win, origin = _window((0, 0, 11, 29), (h, w), 4)
     assert origin == (0, 0) and (win[0].stop, win[1].stop) == (34, 16)
+
+
+def test_the_keep_budget_counts_each_box_with_the_reductions_margins():
+    """A further area is kept only if the union of the boxes *as the reduced map keeps them* (each
+    widened by the reduction's margins) fits the budget: two boxes holding 25 % of a 200 x 200 map
+    fit a 28 % budget bare, but not with a margin of 1.5 % of the diagonal on every side (31 %)."""
+    from somtorch.config import ReductionConfig
+    from somtorch.tasks.reduction import reduce_map
+
+    h = w = 200
+    disp = torch.full((h, w), 10.0)
+    labels = torch.zeros(h, w, dtype=torch.long)
+    labels[20:80, 20:80], disp[20:80, 20:80] = 1, 60.0  # 9 % of the map, ranked first
+    labels[100:180, 100:180], disp[100:180, 100:180] = 2, 40.0  # 16 %
+    valid = torch.ones(h, w, dtype=torch.bool)
+    cfg = AreaConfig(keep_budget=0.28)
+    stats = neuron_stats(labels, disp, 3)
+    areas = find_object_areas(torch.tensor([10.0, 60.0, 40.0]), None, stats, cfg)
+    bare = MapContext.build(disp, valid, labels >= 0, None, cfg, ReductionConfig(tolerance_image=0.0))
+    assert [a.neurons for a in kept_areas(areas, stats, labels, cfg, bare)] == [[1], [2]]
+    ctx = MapContext.build(disp, valid, labels >= 0, None, cfg)  # the default margins
+    kept = kept_areas(areas, stats, labels, cfg, ctx)
+    assert [a.neurons for a in kept] == [[1]]
+    both = reduce_map([(20, 20, 79, 79), (100, 100, 179, 179)], valid)  # what keeping both would keep
+    assert both.kept_union > 0.28 * h * w > 0.25 * h * w
+    # a margin in px shrinks with the stride of the map the object step reads; the shares do not
+    half = MapContext.build(disp, valid, labels >= 0, None, cfg, ReductionConfig(tolerance_px=4.0), stride=2)
+    assert half.margins == (2.0, 0.0, 0.015)
