@@ -184,7 +184,7 @@ class AreaConfig(Validated):
     size_power: float = 0.25
     map_stride: int = 2
     box_coverage: float = 0.99
-    box_quantile: float = 0.005
+    box_quantile: float = 0.001
     ground_clutter: float = 3.0
     merge: float = 0.75
     min_purity: float = 0.15
