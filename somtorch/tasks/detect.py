@@ -57,7 +57,8 @@ class MapContext:
         n_islands: the number of labels of ``islands`` (0 where it is None).
         margins: the reduction's margins ``(px, share of the box side, share of the image diagonal)``
             on this map (:func:`~somtorch.tasks.reduction.reduce_map`): the keep budget counts each
-            box as the reduced map will keep it.
+            box as the reduced map will keep it. :meth:`build` takes them from a
+            :class:`~somtorch.config.ReductionConfig`; a context made directly has none.
     """
 
     disparity: torch.Tensor
