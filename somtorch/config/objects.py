@@ -106,8 +106,9 @@ class AreaConfig(Validated):
         rule: ``"salient"``: neurons link where their segments share a boundary in the image (at
             least ``min_boundary``), the spread is the 5th–95th percentile of the map's disparity,
             the areas in front of their surroundings are ranked by contrast ×
-            ``area_frac ** size_power`` (on a map whose support plane was verified and cut, by
-            size × nearness: ``area_frac ×`` mean disparity) and up to ``max_areas`` are kept; when
+            ``area_frac ** size_power`` (on a map whose support plane was verified and cut, the
+            areas standing on it or above it, by size × nearness: ``area_frac ×`` mean disparity)
+            and up to ``max_areas`` are kept; when
             no candidate passes the checks below, the whole map is kept (flagged ``no_object``).
             ``"paper"``: the paper read literally: neurons adjacent on the SOM grid (one step along
             a row or a column), the spread is the full range d_max − d_min, the nearest area (largest

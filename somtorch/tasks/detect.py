@@ -7,8 +7,9 @@ ensemble. Per member it
 
 1. computes the segments' statistics (:func:`~somtorch.tasks.objects.neuron_stats`),
 2. finds the object areas (:func:`~somtorch.tasks.objects.find_object_areas`),
-3. ranks the candidates (:func:`~somtorch.tasks.objects.select_areas`) and, in rank order, joins,
-   refines and checks each (:func:`kept_areas`),
+3. ranks the candidates (:func:`~somtorch.tasks.objects.select_areas`; on a support-verified map
+   only the areas standing on the support or above it, :func:`standing_areas`) and, in rank order,
+   joins, refines and checks each (:func:`kept_areas`),
 4. and, when nothing convincing is left under the ``salient`` rule, keeps the whole map and flags
    ``no_object`` — for a system meant to keep obstacles, dropping everything is the worst outcome.
 """
@@ -28,7 +29,7 @@ from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, box_purity, map_solidity, merge_adjacent, refine_box, solidity_square
 
 __all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "linkable_segments", "object_mode",
-           "rank_score"]
+           "rank_score", "standing_areas"]
 
 
 @dataclass
@@ -59,6 +60,8 @@ class MapContext:
             on this map (:func:`~somtorch.tasks.reduction.reduce_map`): the keep budget counts each
             box as the reduced map will keep it. :meth:`build` takes them from a
             :class:`~somtorch.config.ReductionConfig`; a context made directly has none.
+        ground_height: where ``islands`` is set (a verified support), disparity − the support plane
+            ``(H, W)``: above it > 0, beneath it < 0 (:func:`standing_areas`); else None.
     """
 
     disparity: torch.Tensor
@@ -75,6 +78,7 @@ class MapContext:
     uncut: torch.Tensor | None = None
     n_islands: int = 0
     margins: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ground_height: torch.Tensor | None = None
 
     @classmethod
     def build(cls, disparity: torch.Tensor, valid: torch.Tensor, segmented: torch.Tensor,
@@ -85,20 +89,23 @@ class MapContext:
         ``stride``-th pixel (a margin in px shrinks with it; the shares do not)."""
         h, w = disparity.shape
         residual, band = None, 0.0
-        if ground is not None and cfg.ground_clutter > 0:
-            residual = (disparity - ground.disparity(h, w)).abs()
+        height = None if ground is None else disparity - ground.disparity(h, w)
+        if height is not None and cfg.ground_clutter > 0:
+            residual = height.abs()
             band = cfg.ground_clutter * ground.tol
         lab = torch.where(segmented, 0, -1)
         islands = continuity = None
         if object_mode(ground, cfg)[0] == "support":
             islands, continuity = _islands(segmented), pair_continuity(disparity)
+        else:
+            height = None
         uncut = None if cfg.rule == "paper" else _regions(segmented, valid,
                                                           solidity_square(disparity.shape, cfg.solidity_size))
         r = reduction or ReductionConfig()
         return cls(disparity, valid, segmented, valid_integral(valid), disparity_spread(disparity, segmented),
                    map_solidity(lab, cfg), residual, band, surround_pairs(segmented, valid, disparity),
                    islands, continuity, uncut, 0 if islands is None else int(islands.max()) + 1,
-                   (r.tolerance_px / stride, r.tolerance_frac, r.tolerance_image))
+                   (r.tolerance_px / stride, r.tolerance_frac, r.tolerance_image), height)
 
 
 def object_mode(ground: GroundPlane | None, cfg: AreaConfig) -> tuple[str, str]:
@@ -166,6 +173,26 @@ def linkable_segments(labels: torch.Tensor, stats: NeuronStats, ctx: MapContext,
     return ok
 
 
+def standing_areas(areas: list[ObjectArea], labels: torch.Tensor, stats: NeuronStats, ctx: MapContext
+                   ) -> list[ObjectArea]:
+    """The candidates of a support-verified map (``ctx.ground_height`` set): the areas that stand on
+    the support or above it, their pixels on average no further beneath its plane than its clutter
+    band (``ctx.clutter_band``). What lies beneath a verified support (the floor past a table top's
+    edge, past a parcel that fills the view) is nothing standing on it, and its size × nearness
+    would outrank what is. ``areas`` itself where the context has no height.
+
+    Shape:
+        ``labels`` ``(H, W)`` long (−1 not segmented).
+    """
+    if ctx.ground_height is None:
+        return areas
+    k = int(stats.count.shape[0])
+    lab = torch.where(labels >= 0, labels, k).view(-1)
+    h_sum = torch.bincount(lab, weights=ctx.ground_height.reshape(-1).double(), minlength=k + 1)[:k]
+    cnt = stats.count.double()
+    return [a for a in areas if float(h_sum[a.neurons].sum()) >= -ctx.clutter_band * float(cnt[a.neurons].sum())]
+
+
 @dataclass
 class ObjectResult:
     """One member's object step: every area, the kept ones (best first), and whether it fell back."""
@@ -193,7 +220,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
                                   linkable=linkable_segments(labels, stats, ctx, cfg))
     else:
         areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
-    kept = kept_areas(areas, stats, labels, cfg, ctx)
+    kept = kept_areas(standing_areas(areas, labels, stats, ctx) if on_support else areas, stats, labels, cfg, ctx)
     if kept:
         return ObjectResult(stats, areas, kept)
     # nothing convincing: keep the whole map rather than nothing

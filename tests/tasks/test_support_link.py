@@ -178,3 +178,39 @@ def test_object_mode_names_the_link_and_ranking_used_and_why():
     assert ctx.islands is not None and ctx.continuity is not None
     ctx = MapContext.build(disp, valid, valid, positioned, AreaConfig())
     assert ctx.islands is None and ctx.continuity is None
+
+
+def test_what_lies_beneath_a_verified_support_is_no_candidate():
+    """On a support-verified floor (the plane at FLOOR_D), a large patch *beneath* it (a lower floor
+    seen past a table's edge: 40 x 30 px, 3 px behind the plane) outranks a small object standing on it
+    by size x nearness; it lies beneath the support, so it is no candidate and the object is kept. On a
+    map whose plane was verified by its position only, nothing changes (the contrast ranking)."""
+    from somtorch.tasks.detect import standing_areas
+
+    labels = torch.full((H, W), -1, dtype=torch.long)
+    disp = torch.full((H, W), FLOOR_D + 10.0, dtype=torch.float64)  # the floor: FLOOR_D + 10 px
+    labels[5:15, 60:70], disp[5:15, 60:70] = 0, FLOOR_D + 14.0  # an object 4 px above it
+    labels[25:55, 5:45], disp[25:55, 5:45] = 1, FLOOR_D + 7.0  # beneath it by 3 px
+    valid = torch.ones(H, W, dtype=torch.bool)
+    segmented = labels >= 0
+    ground = GroundPlane(0.0, 0.0, FLOOR_D + 10.0, 0.5, valid & ~segmented, float((~segmented).float().mean()), True)
+    cfg = AreaConfig()
+    ctx = MapContext.build(disp, valid, segmented, ground, cfg)
+    assert ctx.clutter_band == 1.5 and ctx.ground_height is not None
+    ref = torch.tensor([FLOOR_D + 14.0, FLOOR_D + 7.0])
+    result = find_objects(labels, ref.float(), None, ctx, cfg)
+    stats = result.stats
+    by_size = sorted(result.areas, key=lambda a: -a.area_frac * a.mean_disparity)
+    assert by_size[0].neurons == [1]  # size x nearness alone would rank the patch beneath first
+    assert [a.neurons for a in standing_areas(result.areas, labels, stats, ctx)] == [[0]]
+    assert result.kept[0].neurons == [0] and result.kept[0].box == (60, 5, 69, 14)
+    assert all(a.neurons != [1] for a in result.kept)
+    # within the clutter band beneath the plane it still counts as standing on it (left-over floor
+    # is the clutter filter's business, not this one's)
+    shallow = torch.where(labels == 1, FLOOR_D + 9.0, disp)
+    ctx2 = MapContext.build(shallow, valid, segmented, ground, cfg)
+    assert len(standing_areas(result.areas, labels, stats, ctx2)) == 2
+    # a plane verified by its position only: no height, every area a candidate
+    positioned = dataclasses.replace(ground, support=False)
+    ctx3 = MapContext.build(disp, valid, segmented, positioned, cfg)
+    assert ctx3.ground_height is None and len(standing_areas(result.areas, labels, stats, ctx3)) == 2
