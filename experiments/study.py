@@ -13,7 +13,8 @@ bitwise the separate run with its seed, so both give the same per-run results; o
 Fault tolerance: the sweep directory is fixed by the study name and every job's folder by its
 overrides, and ``metrics.json`` is written last and atomically. Re-running a killed sweep with the
 same command skips every job whose ``metrics.json`` is complete and was made by the same config
-(``config_hash``), recomputes the others and loses nothing.
+and the same library code (:func:`job_hash`), recomputes the others and loses nothing; after the
+code changed, every job runs again.
 
     python -m experiments.study +experiment=table1
     python -m experiments.study +experiment=runtime
@@ -28,6 +29,7 @@ if __name__ == "__main__":  # signals and --help answered before the heavy impor
     start("study")
 
 import dataclasses
+import functools
 import json
 import logging
 import os
@@ -65,7 +67,8 @@ class StudyConfig(RunConfig):
         repeats: the whole job is timed this many times (runtime study; after one untimed warm-up run);
             results come from the first.
         resize: ``[width, height]``: resample the scene first (nearest-neighbour disparity, scaled).
-        skip_complete: skip the job if its folder holds a complete ``metrics.json`` of the same config.
+        skip_complete: skip the job if its folder holds a complete ``metrics.json`` of the same config
+            and the same library code (:func:`job_hash`).
         task_baseline: run this task baseline (somtorch.tasks.baselines, e.g. ``plane_components``) once
             instead of the pipeline; aggregate prints it beside the paper and the SOM (None = the pipeline).
     """
@@ -107,17 +110,41 @@ def complete_metrics(path: Path, chash: str) -> dict | None:
     return m
 
 
+_SOURCE_SUFFIXES = (".py", ".cpp", ".h", ".cu")
+
+
+def source_digest(root: Path) -> str:
+    """A digest of the source files under ``root`` (``.py`` and the native extension's ``.cpp`` /
+    ``.h`` / ``.cu``, by relative path and bytes, in path order): 16 hex digits."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for p in sorted(q for q in root.rglob("*") if q.suffix in _SOURCE_SUFFIXES and q.is_file()):
+        h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+@functools.lru_cache(maxsize=1)
+def code_digest() -> str:
+    """:func:`source_digest` of the installed ``somtorch`` package, computed once per process."""
+    import somtorch
+
+    return source_digest(Path(somtorch.__file__).parent)
+
+
 def job_hash(cfg: StudyConfig, config: dict[str, Any]) -> str:
-    """The job's config hash: of ``config``, and for a trained task baseline also of the model it
-    scores (its registry entry's ``identity``), so that a study re-runs a learned baseline's job
-    after the model changed instead of skipping it as complete."""
+    """The job's hash: of ``config`` and of the library's code (:func:`code_digest`), and for a
+    trained task baseline also of the model it scores (its registry entry's ``identity``), so that a
+    study re-runs a job after the code or the model changed instead of skipping it as complete (the
+    same config gives other results under other code)."""
+    keyed = {**config, "code": code_digest()}
     if cfg.task_baseline is not None:
         from somtorch.tasks.baselines import get_task_baseline
 
         identity = get_task_baseline(cfg.task_baseline).identity
         if identity is not None:
-            return config_hash({**config, "task_baseline_model": identity()})
-    return config_hash(config)
+            return config_hash({**keyed, "task_baseline_model": identity()})
+    return config_hash(keyed)
 
 
 def execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[str, Any]:
@@ -146,7 +173,7 @@ def _execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[st
     if cfg.skip_complete:
         done = complete_metrics(out_dir, chash)
         if done is not None:
-            log.info("skipping %s: complete metrics.json of the same config (hash %s)", out_dir, chash)
+            log.info("skipping %s: complete metrics.json of the same config and code (hash %s)", out_dir, chash)
             return done
     t_start = time.perf_counter()
     scene = load_input(cfg)  # every file check before any work

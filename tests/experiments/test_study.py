@@ -270,18 +270,47 @@ def test_a_trained_baselines_job_hash_names_its_model():
     from somtorch.config.learned import LearnedDataConfig, LearnedFitConfig, LearnedModelConfig
     from somtorch.tasks.baselines import get_task_baseline
 
+    from experiments.study import code_digest
+
     config = {"data": {"name": "kitti2015"}, "task_baseline": "learned"}
     key = model_key(LearnedModelConfig(), LearnedDataConfig(), LearnedFitConfig())
     assert get_task_baseline("learned").identity() == key
     learned = job_hash(StudyConfig(task_baseline="learned"), config)
-    assert learned == config_hash({**config, "task_baseline_model": key}) != config_hash(config)
+    code = code_digest()
+    assert learned == config_hash({**config, "code": code, "task_baseline_model": key}) != config_hash(config)
     # another model (another training config) is another job: a study runs it again, not skips it
     other = model_key(LearnedModelConfig(), LearnedDataConfig(frames=3), LearnedFitConfig())
-    assert config_hash({**config, "task_baseline_model": other}) != learned
-    # a baseline that is its code keeps the plain hash: studies scored before stay complete
+    assert config_hash({**config, "code": code, "task_baseline_model": other}) != learned
+    # a baseline that is its code: the config and the code
     plain = {**config, "task_baseline": "plane_components"}
-    assert job_hash(StudyConfig(task_baseline="plane_components"), plain) == config_hash(plain)
-    assert job_hash(StudyConfig(), config) == config_hash(config)
+    assert job_hash(StudyConfig(task_baseline="plane_components"), plain) == config_hash({**plain, "code": code})
+    assert job_hash(StudyConfig(), config) == config_hash({**config, "code": code})
+
+
+def test_a_jobs_hash_changes_with_the_library_code(tmp_path):
+    """The same config under other code is another job (a study re-runs it rather than keep results
+    of the code before): the digest reads every source file's path and bytes, nothing else."""
+    import somtorch
+    from experiments.study import code_digest, source_digest
+
+    pkg = tmp_path / "pkg"
+    (pkg / "core" / "csrc").mkdir(parents=True)
+    (pkg / "a.py").write_text("x = 1\n")
+    (pkg / "core" / "csrc" / "op.cpp").write_text("int f() { return 1; }\n")
+    (pkg / "notes.md").write_text("not code\n")
+    first = source_digest(pkg)
+    assert len(first) == 16 and source_digest(pkg) == first
+    (pkg / "notes.md").write_text("still not code\n")
+    assert source_digest(pkg) == first
+    (pkg / "a.py").write_text("x = 2\n")
+    second = source_digest(pkg)
+    assert second != first
+    (pkg / "core" / "csrc" / "op.cpp").write_text("int f() { return 2; }\n")
+    third = source_digest(pkg)
+    assert third not in (first, second)
+    (pkg / "a.py").rename(pkg / "b.py")  # a file moved is other code too
+    assert source_digest(pkg) != third
+    assert code_digest() == source_digest(Path(somtorch.__file__).parent)
 
 
 def test_optuna_sweeper_searches_and_reports_the_best_trade_off(tmp_path, shared_data):
