@@ -29,7 +29,6 @@ if __name__ == "__main__":  # signals and --help answered before the heavy impor
     start("study")
 
 import dataclasses
-import functools
 import json
 import logging
 import os
@@ -124,12 +123,18 @@ def source_digest(root: Path) -> str:
     return h.hexdigest()[:16]
 
 
-@functools.lru_cache(maxsize=1)
+_CODE_DIGEST: dict[str, str] = {}  # a plain dict, not functools.lru_cache: a launcher pickles this
+# module's functions by value when it runs as __main__, and a cache object would go by reference
+
+
 def code_digest() -> str:
     """:func:`source_digest` of the installed ``somtorch`` package, computed once per process."""
     import somtorch
 
-    return source_digest(Path(somtorch.__file__).parent)
+    root = Path(somtorch.__file__).parent
+    if str(root) not in _CODE_DIGEST:
+        _CODE_DIGEST[str(root)] = source_digest(root)
+    return _CODE_DIGEST[str(root)]
 
 
 def job_hash(cfg: StudyConfig, config: dict[str, Any]) -> str:
