@@ -47,7 +47,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from .run import CONF_DIR, load_input
 from .schema import RunConfig, register
-from .metrics_schema import SCHEMA, config_hash
+from .metrics_schema import SCHEMA, config_hash, files_digest
 from somtorch.evaluation import merge_runs, per_object_scores, run_records, summarize_runs
 
 log = logging.getLogger("somtorch.study")
@@ -115,12 +115,7 @@ _SOURCE_SUFFIXES = (".py", ".cpp", ".h", ".cu")
 def source_digest(root: Path) -> str:
     """A digest of the source files under ``root`` (``.py`` and the native extension's ``.cpp`` /
     ``.h`` / ``.cu``, by relative path and bytes, in path order): 16 hex digits."""
-    import hashlib
-
-    h = hashlib.sha256()
-    for p in sorted(q for q in root.rglob("*") if q.suffix in _SOURCE_SUFFIXES and q.is_file()):
-        h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
-    return h.hexdigest()[:16]
+    return files_digest(root, (q for q in root.rglob("*") if q.suffix in _SOURCE_SUFFIXES and q.is_file()))
 
 
 _CODE_DIGEST: dict[str, str] = {}  # a plain dict, not functools.lru_cache: a launcher pickles this

@@ -53,21 +53,21 @@ def frame_digest(folder: str | Path) -> str:
     Raises:
         FileNotFoundError: ``folder`` holds no generated frame (no ``disp0GT.pfm``).
     """
-    import hashlib
     import json
+
+    from .metrics_schema import files_digest
+
+    def read(f: Path) -> bytes:
+        if f.name != "objects.json":
+            return f.read_bytes()
+        doc = json.loads(f.read_bytes())
+        doc.pop("generator", None)
+        return json.dumps(doc, sort_keys=True).encode()
 
     folder = Path(folder)
     if not (folder / "disp0GT.pfm").is_file():
         raise FileNotFoundError(f"{folder}: no generated frame (disp0GT.pfm missing)")
-    h = hashlib.sha256()
-    for f in sorted(p for p in folder.iterdir() if p.is_file()):
-        data = f.read_bytes()
-        if f.name == "objects.json":
-            doc = json.loads(data)
-            doc.pop("generator", None)
-            data = json.dumps(doc, sort_keys=True).encode()
-        h.update(f.name.encode() + b"\0" + data + b"\0")
-    return h.hexdigest()[:16]
+    return files_digest(folder, (p for p in folder.iterdir() if p.is_file()), read)
 
 
 def corpus_digest(digests: dict[str, str]) -> str:
