@@ -24,7 +24,10 @@ def disp(tmp_path):
 def test_training_features_are_the_in_memory_ones(disp, tmp_path):
     res = train_segment_large(disp, tmp_path / "w", memory_budget=64 << 20)
     dt = torch.from_numpy(np.array(disp))
-    ref = make_features(dt, dt > 0, normalize="image").subsample(FeatureConfig().train_stride)
+    fc = FeatureConfig()
+    stride = fc.stride_at(fc.train_stride, *disp.shape)
+    assert stride == 6  # 10 · √(120,000 / 307,200), rounded: counted on 640 × 480, scaled down
+    ref = make_features(dt, dt > 0, normalize="image").subsample(stride)
     got = np.load(tmp_path / "w" / "train_features.npy")
     assert got.shape == tuple(ref.x.shape) and res.n_train == len(got)
     assert np.array_equal(got, ref.x.numpy())
@@ -72,7 +75,8 @@ def test_features_equal_make_features_for_every_option(disp, tmp_path, normalize
     dt = torch.from_numpy(d)
     full = make_features(dt, dt > 0, normalize=normalize, d_weight=d_weight)
     stride = fc.stride_at(train_stride, *d.shape)
-    assert stride == (8 if reference_pixels == 30_000 else train_stride)  # 4 · √(120,000 / 30,000)
+    # 4 · √(120,000 / 30,000) = 8; 10 · √(120,000 / 307,200) = 6.25; 0: as given; 1 stays 1
+    assert stride == {30_000: 8, 0: train_stride}.get(reference_pixels, 6 if train_stride == 10 else 1)
     ref = full.subsample(stride)
     got = torch.from_numpy(np.load(tmp_path / "w" / "train_features.npy"))
     assert torch.equal(got, ref.x)

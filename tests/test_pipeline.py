@@ -230,8 +230,8 @@ def test_a_map_that_is_all_ground_is_segmented_whole_with_a_warning(caplog):
     res = run_pipeline(scene_from_arrays(boxed, valid, name="box_on_floor"), PipelineConfig(ensemble=2),
                        metrics=False)
     assert res.ground is not None and res.ground.support
-    # (the object step reads every 2nd pixel: the far edges fall on 78 and 68)
-    assert all(m.kept[0].box == (50, 50, 78, 68) for m in res.members)
+    # a 160 × 120 map is read at every pixel (strides counted on 640 × 480 scale down): the box exactly
+    assert all(m.kept[0].box == (50, 50, 79, 69) for m in res.members)
 
 
 def _floor_with_boxes(noise: float) -> tuple:
@@ -267,11 +267,11 @@ def test_a_noisy_map_is_read_through_the_median_and_a_clean_one_as_given():
     assert res.median == 3 and torch.equal(noisy.disparity, before)
     read, window = denoised(noisy, cfg)
     assert window == 3 and float((read.disparity - noisy.disparity).abs().max()) > 0.5
-    # the larger box rises 2.5 px: read through the median it is kept in every run, as given in none
-    # (the noise splits it into speckled segments)
+    # the larger box rises 2.5 px: read through the median it is kept in every run, as given in at most
+    # one of four (the noise splits it into speckled segments)
     assert all(m.score.useful_hit for m in res.members)
     raw = run_pipeline(noisy, replace(cfg, features=replace(cfg.features, median=0)), metrics=False)
-    assert raw.median == 0 and not any(m.score.useful_hit for m in raw.members)
+    assert raw.median == 0 and sum(m.score.useful_hit for m in raw.members) <= 1
     calm = run_pipeline(clean, cfg, metrics=False)
     off = run_pipeline(clean, replace(cfg, features=replace(cfg.features, median=0)), metrics=False)
     assert calm.median == 0 and torch.equal(calm.labels, off.labels)
@@ -506,9 +506,13 @@ def test_strides_scale_with_the_resolution_so_a_resampled_map_trains_on_as_many_
     n_small = int(motorcycle.valid[::train_stride(motorcycle, cfg), ::train_stride(motorcycle, cfg)].sum())
     n_big = int(big.valid[::train_stride(big, cfg), ::train_stride(big, cfg)].sum())
     assert 0.8 < n_big / n_small < 1.25
-    # a smaller image keeps the strides as given; reference_pixels 0 counts strides in pixels
+    # a smaller image scales them down alike (session 27): as many training pixels, the object step
+    # reads as many; reference_pixels 0 counts strides in pixels
     small = resize_scene(motorcycle, motorcycle.width // 2, motorcycle.height // 2)
-    assert train_stride(small, cfg) == cfg.features.train_stride and map_stride(small, cfg) == cfg.objects.map_stride
+    assert abs(2 * train_stride(small, cfg) - train_stride(motorcycle, cfg)) <= 1
+    n_half = int(small.valid[::train_stride(small, cfg), ::train_stride(small, cfg)].sum())
+    assert 0.8 < n_half / n_small < 1.25
+    assert map_stride(small, cfg) == 1 < map_stride(motorcycle, cfg) == cfg.objects.map_stride
     raw = replace(cfg, features=replace(cfg.features, reference_pixels=0))
     assert train_stride(big, raw) == cfg.features.train_stride and map_stride(big, raw) == cfg.objects.map_stride
     assert cfg.features.stride_at(1, 5 * 480, 5 * 640) == 1  # NOR (every pixel) stays every pixel

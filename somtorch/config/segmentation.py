@@ -28,8 +28,9 @@ class FeatureConfig(Validated):
         color_weight: append the left image's Y, Cb, Cr (each in [0, 1]) times this weight to
             every pixel vector (0 = off; needs the scene's image).
         reference_pixels: the pipeline's strides (``train_stride``, ``objects.map_stride``) are
-            counted on an image of this many pixels (640 × 480), see :meth:`stride_at`; 0 = strides
-            in pixels as given (the paper's reading).
+            counted on an image of this many pixels (640 × 480) and scale with √(pixels /
+            reference_pixels) on larger and smaller images, see :meth:`stride_at`; 0 = strides in
+            pixels as given (the paper's reading).
         median: a map whose per-pixel noise sets the ground band (``ground.noise_band`` × σ >
             ``ground.tol_px``, σ its :func:`~somtorch.tasks.ground.noise_sigma`: a dense sensor's
             noise) is read through a median of the valid disparities in this window (odd,
@@ -64,15 +65,20 @@ class FeatureConfig(Validated):
 
     def stride_at(self, stride: int, height: int, width: int) -> int:
         """``stride`` (counted on ``reference_pixels``) on a ``height × width`` image: times
-        √(height · width / reference_pixels) when that is > 1, rounded; a smaller image keeps it,
-        a stride of 1 stays 1.
+        √(height · width / reference_pixels), rounded, at least 1 — on a larger image and on a
+        smaller one alike, so that a scene trains on as many pixels and its object step reads as
+        many at any resolution (session 27; until then a smaller image kept the strides as given,
+        and at a quarter of the resolution the object step read a sixteenth of the pixels). A
+        stride of 1 stays 1.
 
         >>> f = FeatureConfig()
-        >>> f.stride_at(10, 960, 1280), f.stride_at(2, 240, 320), f.stride_at(1, 960, 1280)
-        (20, 2, 1)
+        >>> f.stride_at(10, 960, 1280), f.stride_at(10, 240, 320), f.stride_at(2, 240, 320)
+        (20, 5, 1)
+        >>> f.stride_at(1, 960, 1280)
+        1
         """
         scale = 1.0 if self.reference_pixels == 0 else (height * width / self.reference_pixels) ** 0.5
-        return 1 if stride == 1 else max(1, int(stride * max(scale, 1.0) + 0.5))
+        return 1 if stride == 1 else max(1, int(stride * scale + 0.5))
 
 
 # ------------------------------------------------------------------------------------ step 1b: SOM
