@@ -52,21 +52,34 @@ def rematched(spec: Any, scene: Any, variant: str, data_dir: str | Path, corpus:
         path, pair, ndisp = Path(data_dir) / spec.folder, (spec.left, spec.right), spec.ndisp
     else:
         return None
+    f = SGBM_RESOLUTION.get(variant, 1.0)
+    ndisp = max(16, -(-round(ndisp * f) // 16) * 16)
     params = dataclasses.replace(SGBMParams(numDisparities=ndisp), **SGBM_VARIANTS[variant])
-    disp, valid = _matched(path, pair, params)
+    disp, valid = _matched(path, pair, params, f)
+    if f != 1.0:
+        from somtorch.disparity.resize import resize_scene
+
+        scene = resize_scene(scene, disp.shape[-1], disp.shape[-2])
     return scene_from_arrays(disp, valid, image=scene.image, objects=scene.objects,
                              object_info=scene.object_info, camera=scene.camera,
                              name=f"{scene.name}+sgbm:{variant}")
 
 
-def _matched(path: Path, pair: tuple[str, str], params: Any) -> tuple[Any, Any]:
+def _matched(path: Path, pair: tuple[str, str], params: Any, factor: float = 1.0) -> tuple[Any, Any]:
     """SGBM's ``(disparity, valid)`` of the stereo pair ``pair`` (left, right image files) under
-    ``path``, matched with ``params``."""
+    ``path``, matched with ``params`` — on the pair downsized by ``factor`` (area interpolation)
+    where it is not 1."""
+    import cv2
+
     from somtorch.disparity.io import read_image
     from somtorch.disparity.stereo import compute_disparity
 
     # (3, H, W) RGB uint8 → (H, W, 3) BGR, as OpenCV reads it
     images = [read_image(path / f).permute(1, 2, 0).numpy()[..., ::-1].copy() for f in pair]
+    if factor != 1.0:
+        h, w = images[0].shape[:2]
+        size = (max(8, round(w * factor)), max(8, round(h * factor)))
+        images = [cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in images]
     return compute_disparity(images[0], images[1], params)
 
 
@@ -104,7 +117,13 @@ SGBM_VARIANTS = {
     # a setting common in OpenCV's examples: a 7 px block, P1 / P2 from it, plain SGBM, a wide speckle range
     "tutorial": {"blockSize": 7, "P1": 8 * 3 * 7 ** 2, "P2": 32 * 3 * 7 ** 2, "speckleRange": 32,
                  "mode": "sgbm"},
+    # the corpus setting on a camera of half the resolution (below): a small sensor's SGBM map
+    "half": {},
 }
+#: ``sgbm:NAME`` on a camera of another resolution, the same field of view: the stereo pair is
+#: downsized by this factor (area interpolation) before it is matched, the number of disparities with
+#: it (to a multiple of 16), and the objects, image and camera are resampled to the map's size.
+SGBM_RESOLUTION = {"half": 0.5}
 #: ``blotch:S``: the correlation length of its noise, as a share of the image's shorter side.
 BLOTCH_SCALE = 0.02
 

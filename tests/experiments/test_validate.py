@@ -468,10 +468,16 @@ def test_sgbm_transform_matches_a_frames_stereo_pair_again_under_another_setting
     raw = rematched(spec, scene, "raw", tmp_path, corpus=tmp_path)
     assert int(raw.valid.sum()) > int(scene.valid.sum())  # the filters it drops leave pixels unmatched
     assert torch.equal(raw.objects, scene.objects) and raw.name == "f_sgbm+sgbm:raw"
+    # a camera of half the resolution: the pair downsized, then matched; the labels resampled with it
+    half = rematched(spec, scene, "half", tmp_path, corpus=tmp_path)
+    h, w = scene.disparity.shape
+    assert half.disparity.shape == half.objects.shape == (round(h / 2), round(w / 2))
+    assert set(half.objects.unique().tolist()) == set(scene.objects.unique().tolist())
+    assert int(half.valid.sum()) > 0 and float(half.disparity[half.valid].max()) < float(scene.disparity.max())
     gt = dataclasses.replace(spec, name="f", disparity="gt")
     assert rematched(gt, load_frame(gt, tmp_path, corpus=tmp_path), "raw", tmp_path, corpus=tmp_path) is None
     assert rematched(dataclasses.replace(spec, junk="flip"), scene, "raw", tmp_path, corpus=tmp_path) is None
-    with pytest.raises(ValueError, match="sgbm needs a setting of raw, tutorial"):
+    with pytest.raises(ValueError, match="sgbm needs a setting of raw, tutorial, half"):
         check_junk_kind("sgbm:nope")
     with pytest.raises(ValueError, match="rematched"):
         add_junk(scene, "sgbm:raw")
