@@ -53,7 +53,8 @@ def rematched(spec: Any, scene: Any, variant: str, data_dir: str | Path, corpus:
     else:
         return None
     f = SGBM_RESOLUTION.get(variant, 1.0)
-    ndisp = max(16, -(-round(ndisp * f) // 16) * 16)
+    if f != 1.0:  # the search range scales with the image, to a multiple of 16
+        ndisp = max(16, -(-round(ndisp * f) // 16) * 16)
     params = dataclasses.replace(SGBMParams(numDisparities=ndisp), **SGBM_VARIANTS[variant])
     disp, valid = _matched(path, pair, params, f)
     if f != 1.0:

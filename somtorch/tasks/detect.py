@@ -220,7 +220,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
                                   linkable=linkable_segments(labels, stats, ctx, cfg))
     else:
         areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
-    kept = kept_areas(standing_areas(areas, labels, stats, ctx) if on_support else areas, stats, labels, cfg, ctx)
+    kept = kept_areas(standing_areas(areas, labels, stats, ctx), stats, labels, cfg, ctx)  # all where no support
     if kept:
         return ObjectResult(stats, areas, kept)
     # nothing convincing: keep the whole map rather than nothing
