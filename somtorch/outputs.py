@@ -53,6 +53,11 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "reduction_crops": m.reduction.reduction_crops,
             "no_object": m.no_object,
             "kept_everything": m.reduction.reduction_union < 1.0,
+            # what became of each area the selection looked at (tasks.detect.Candidate), best first
+            "candidates": [{"rank": c.rank, "score": c.score, "verdict": c.verdict, "pixels": c.area.pixels,
+                            "box_xyxy": list(c.area.box), "mean_disparity": c.area.mean_disparity,
+                            "contrast": c.area.contrast} for c in m.candidates],
+            "areas_not_ranked": dict(m.unranked),
             "score": m.score.as_dict() if m.score is not None else None,
         })
     out: dict[str, Any] = {

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import torch
@@ -31,7 +31,7 @@ from .disparity.filters import median_filter, median_noise
 from .disparity.scene import Scene
 from .resources import Estimate, estimate
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
-from .tasks.detect import MapContext, find_objects
+from .tasks.detect import Candidate, MapContext, find_objects
 from .tasks.ground import GroundPlane, fit_ground_plane, noise_sigma
 from .tasks.objects import NeuronStats, ObjectArea
 from .tasks.reduction import Reduction, reduce_map, valid_integral
@@ -56,6 +56,10 @@ class MemberResult:
     score: Score | None
     stats: NeuronStats
     no_object: bool = False  # nothing convincing was found: the whole map is kept
+    # what became of each area the selection looked at, and how many it left out by reason
+    # (tasks.detect.Candidate, ObjectResult.unranked): metrics.json's "candidates"
+    candidates: list[Candidate] = field(default_factory=list)
+    unranked: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -286,13 +290,14 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
             if st > 1:
                 found.areas = [_full_size(a, st, h, w) for a in found.areas]
                 found.kept = [_full_size(a, st, h, w) for a in found.kept]
+                found.candidates = [replace(c, area=_full_size(c.area, st, h, w)) for c in found.candidates]
         with timer("reduction"):
             red = reduce_map([a.box for a in found.kept], scene.valid, tolerance_px=r.tolerance_px,
                              tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image,
                              integral=integral)
         score = score_reduction(red, obj_mask, scene.valid, x_opt=x_opt) if obj_mask is not None else None
         members.append(MemberResult(seg.seeds[e], found.areas, found.kept, red, score, found.stats,
-                                    found.no_object))
+                                    found.no_object, found.candidates, found.unranked))
     _warn_fallbacks(scene.name, members)
     return members
 

@@ -12,11 +12,15 @@ ensemble. Per member it
    joins, refines and checks each (:func:`kept_areas`),
 4. and, when nothing convincing is left under the ``salient`` rule, keeps the whole map and flags
    ``no_object`` — for a system meant to keep obstacles, dropping everything is the worst outcome.
+
+What became of each candidate (kept, refused by a check and which, skipped by the keep budget, …)
+is recorded as a :class:`Candidate` per area the selection looked at (``metrics.json``'s
+``candidates``): why an object was not kept, without a debugger.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import torch
 
@@ -28,8 +32,8 @@ from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_are
 from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, box_purity, map_solidity, merge_adjacent, refine_box, solidity_square
 
-__all__ = ["MapContext", "ObjectResult", "find_objects", "kept_areas", "linkable_segments", "object_mode",
-           "rank_score", "standing_areas"]
+__all__ = ["Candidate", "MapContext", "ObjectResult", "find_objects", "kept_areas", "linkable_segments",
+           "object_mode", "rank_score", "standing_areas"]
 
 
 @dataclass
@@ -194,13 +198,32 @@ def standing_areas(areas: list[ObjectArea], labels: torch.Tensor, stats: NeuronS
 
 
 @dataclass
+class Candidate:
+    """An area the selection looked at, its rank score and what became of it (``verdict``: one line,
+    e.g. ``"kept"``, ``"refused: purity 0.11 < min_purity 0.15"``, ``"skipped: the kept boxes would
+    hold 61 % of the valid pixels > keep_budget 35 %"``). ``rank``: its place among the ranked
+    candidates (0 = first), None for an area the ranking left out (beneath a verified support)."""
+
+    area: ObjectArea
+    score: float
+    rank: int | None
+    verdict: str
+
+
+@dataclass
 class ObjectResult:
-    """One member's object step: every area, the kept ones (best first), and whether it fell back."""
+    """One member's object step: every area, the kept ones (best first), and whether it fell back;
+    ``candidates``: the ranked candidates and the areas beneath a verified support that would have
+    outranked the last of them, each with its verdict (:class:`Candidate`); ``unranked``: how many
+    areas the ranking left out, by reason (those beneath the support listed in ``candidates``
+    included)."""
 
     stats: NeuronStats
     areas: list[ObjectArea]
     kept: list[ObjectArea]
     no_object: bool = False
+    candidates: list[Candidate] = field(default_factory=list)
+    unranked: dict[str, int] = field(default_factory=dict)
 
 
 def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: torch.Tensor | None,
@@ -220,15 +243,51 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
                                   linkable=linkable_segments(labels, stats, ctx, cfg))
     else:
         areas = find_object_areas(ref_disparity, grid_d2, stats, cfg)
-    kept = kept_areas(standing_areas(areas, labels, stats, ctx), stats, labels, cfg, ctx)  # all where no support
+    standing = standing_areas(areas, labels, stats, ctx)  # all where no support
+    trace: list[Candidate] = []
+    kept = kept_areas(standing, stats, labels, cfg, ctx, trace=trace)
+    unranked = _unranked(areas, standing, trace, cfg, on_support)
     if kept:
-        return ObjectResult(stats, areas, kept)
+        return ObjectResult(stats, areas, kept, candidates=trace, unranked=unranked)
     # nothing convincing: keep the whole map rather than nothing
     ys, xs = ctx.valid.nonzero(as_tuple=True)
     box = (int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())) if ys.numel() else (0, 0, -1, -1)
     whole = ObjectArea(sorted({int(v) for v in labels.unique().tolist()} - {-1}), int(ctx.valid.sum()), box,
                        float(torch.masked_select(ctx.disparity, ctx.valid).mean()) if ys.numel() else 0.0, 0.0, 1.0, 0, confidence=0.0)
-    return ObjectResult(stats, areas, [whole], no_object=True)
+    return ObjectResult(stats, areas, [whole], no_object=True, candidates=trace, unranked=unranked)
+
+
+def _unranked(areas: list[ObjectArea], standing: list[ObjectArea], trace: list[Candidate], cfg: AreaConfig,
+              on_support: bool) -> dict[str, int]:
+    """Add to ``trace`` the areas beneath a verified support (not in ``standing``) that score above the
+    last ranked candidate (they would have been tried), and count the areas left out of the ranking:
+    beneath the support, behind their surroundings (contrast < 0), below the ``max_areas`` best."""
+    if cfg.rule == "paper":
+        return {}
+    standing_ids = {id(a) for a in standing}
+    beneath = [a for a in areas if id(a) not in standing_ids]
+    full = len(trace) >= cfg.max_areas  # else a further candidate would have been tried, whatever its score
+    floor = min((c.score for c in trace), default=float("-inf")) if full else float("-inf")
+    for a in sorted(beneath, key=lambda a: -rank_score(a, cfg, on_support=on_support)):
+        score = rank_score(a, cfg, on_support=on_support)
+        if score > floor and a.contrast >= 0:
+            trace.append(Candidate(a, score, None, "left out: it lies beneath the verified support"))
+    behind = sum(a.contrast < 0 for a in standing)
+    counts = {"beneath the verified support": len(beneath), "behind their surroundings": behind,
+              "below the max_areas best": len(standing) - behind - sum(c.rank is not None for c in trace)}
+    return {k: v for k, v in counts.items() if v > 0}
+
+
+def _verdict(outcomes: list[str], joined: ObjectArea, cand: ObjectArea) -> str:
+    """One line for a candidate from the outcomes of its parts (one per part, in order)."""
+    grown = len(joined.neurons) - len(cand.neurons)
+    merged = f" (merge joined {grown} segment{'s' if grown != 1 else ''})" if grown else ""
+    if len(outcomes) == 1:
+        return outcomes[0] + merged
+    n_kept = outcomes.count("kept")
+    head = f"kept {n_kept} of {len(outcomes)} parts" if n_kept else f"none of {len(outcomes)} parts kept"
+    rest = "; ".join(f"part {i + 1} {o}" for i, o in enumerate(outcomes) if o != "kept")
+    return f"{head}{merged}: {rest}" if rest else head + merged
 
 
 def _window(box: tuple[int, int, int, int], shape: tuple[int, ...], margin: int
@@ -290,7 +349,7 @@ def _refined(joined: ObjectArea, part: torch.Tensor, labels: torch.Tensor, win: 
 
 
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
-               ctx: MapContext) -> list[ObjectArea]:
+               ctx: MapContext, *, trace: list[Candidate] | None = None) -> list[ObjectArea]:
     """Select, join, refine and check the candidates in rank order.
 
     Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with segments of
@@ -311,6 +370,9 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     the map) and
     ``confidence`` (rank score over the best candidate's).
 
+    ``trace``: a list that receives a :class:`Candidate` per ranked candidate, in rank order, with
+    what became of it (kept, refused by which check, skipped by the budget, not tried).
+
     Shape:
         ``labels`` ``(H, W)``.
     """
@@ -320,8 +382,13 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     kept, first, n_areas = [], None, 0
     square = solidity_square(labels.shape, cfg.solidity_size, 1)
     best = max((rank_score(a, cfg, on_support=on_support) for a in ranked), default=0.0)
+    verdicts: list[str] = []
     for cand in ranked:
+        if n_areas == cfg.max_areas:
+            verdicts.append(f"not tried: max_areas ({cfg.max_areas}) areas kept already")
+            continue
         if bool(taken[torch.tensor(cand.neurons)].any()):
+            verdicts.append("not tried: an area kept before it joined its segments")
             continue
         confidence = rank_score(cand, cfg, on_support=on_support) / best if best > 0 else 1.0
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
@@ -332,28 +399,41 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         own = label_mask(labels[win], joined.neurons)  # refine_box moves the box, not the neurons
         any_kept = False
         residual = None if ctx.ground_residual is None else ctx.ground_residual[win]
+        outcomes = []
         for part in _parts(own, None if ctx.uncut is None else ctx.uncut[win], cfg.box_coverage, residual,
                            ctx.clutter_band):
             done = _refined(joined, part, labels, win, origin, residual, square, confidence, cfg, ctx)
             if first is None:
                 first = done
-            if done.purity < cfg.min_purity or done.solidity_rel < cfg.min_solidity:
+            if done.purity < cfg.min_purity:
+                outcomes.append(f"refused: purity {done.purity:.2f} < min_purity {cfg.min_purity:g}")
+                continue
+            if done.solidity_rel < cfg.min_solidity:
+                outcomes.append(f"refused: solidity {done.solidity_rel:.2f} × the map's < min_solidity "
+                                f"{cfg.min_solidity:g}")
                 continue
             if kept and cfg.keep_budget < 1:
                 m_px, m_frac, m_image = ctx.margins
                 union = reduce_map([a.box for a in kept] + [done.box], ctx.valid, tolerance_px=m_px,
                                    tolerance_frac=m_frac, tolerance_image=m_image, integral=ctx.integral)
                 if union.kept_union > cfg.keep_budget * max(union.valid_total, 1):
+                    share = 100 * union.kept_union / max(union.valid_total, 1)
+                    outcomes.append(f"skipped: the kept boxes would hold {share:.0f} % of the valid pixels > "
+                                    f"keep_budget {100 * cfg.keep_budget:g} %")
                     continue  # it would not fit the reduction budget; a smaller one may
             kept.append(done)
+            outcomes.append("kept")
             any_kept = True
+        verdicts.append(_verdict(outcomes, joined, cand))
         if any_kept:  # the parts of one area count as one of the max_areas
             taken[torch.tensor(joined.neurons)] = True
             n_areas += 1
-            if n_areas == cfg.max_areas:
-                break
     if not kept and first is not None and cfg.rule == "paper":
         kept = [first]
+        verdicts[0] = "kept: the paper rule keeps its nearest area"
+    if trace is not None:
+        trace.extend(Candidate(c, rank_score(c, cfg, on_support=on_support), i, v)
+                     for i, (c, v) in enumerate(zip(ranked, verdicts)))
     for i, a in enumerate(kept):
         a.rank = i
     return kept

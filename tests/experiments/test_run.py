@@ -323,6 +323,10 @@ def test_a_file_input_names_its_folder_and_scene(tmp_path):
     assert m["scene"]["name"] == "my_scan_07"
     assert m["scene"]["invalid_pixels"] == 0 and "removed_pixels" not in m["scene"]
     assert all(isinstance(x["kept_everything"], bool) for x in m["members"])
+    for x in m["members"]:  # what became of each candidate: a kept one where the member kept an area
+        assert all(c["verdict"] and len(c["box_xyxy"]) == 4 for c in x["candidates"])
+        assert x["no_object"] or any(c["verdict"].startswith("kept") for c in x["candidates"])
+        assert all(n > 0 for n in x["areas_not_ranked"].values())
     assert m["object_step"]["mode"] in ("support", "contrast") and m["object_step"]["reason"]
     assert ("ground_plane" in m) == ("no ground plane" not in m["object_step"]["reason"])
 

@@ -170,6 +170,48 @@ def test_kept_areas_skips_a_speckle_area_whose_box_is_mostly_other_pixels():
     assert not found.no_object and [(a.neurons, a.box) for a in found.kept] == [(a.neurons, a.box) for a in kept]
 
 
+def test_every_ranked_candidate_carries_what_became_of_it():
+    labels, disp, stats, areas = _speckles_and_object()
+    ctx = _ctx(labels, disp)
+    trace = []
+    kept = kept_areas(areas, stats, labels, AreaConfig(), ctx, trace=trace)
+    assert [c.area.neurons for c in trace] == [a.neurons for a in select_areas(areas, stats, AreaConfig())]
+    assert [c.rank for c in trace] == list(range(len(trace))) and trace[0].score > trace[1].score
+    # the speckles first, refused by the purity check (its figure and the threshold named), the object kept
+    assert trace[0].area.neurons == [2] and trace[0].verdict.startswith("refused: purity 0.")
+    assert "< min_purity 0.15" in trace[0].verdict
+    assert trace[1].area.neurons == [1] and trace[1].verdict == "kept" and [a.neurons for a in kept] == [[1]]
+    # one area allowed and it fails: the rest is not tried, and find_objects says so in its fallback too
+    found = find_objects(labels, torch.tensor([10.0, 40.0, 90.0]), None, ctx, AreaConfig(max_areas=1))
+    assert found.no_object and [c.verdict.split(":")[0] for c in found.candidates] == ["refused"]
+    # the trace records and never decides: the kept areas are the same with and without it
+    assert [(a.neurons, a.box) for a in kept_areas(areas, stats, labels, AreaConfig(), ctx)] == \
+        [(a.neurons, a.box) for a in kept]
+
+
+def test_a_candidate_over_the_keep_budget_is_skipped_with_the_share_it_would_take():
+    h, w = 120, 160
+    disp = torch.full((h, w), 10.0)
+    labels = torch.zeros(h, w, dtype=torch.long)
+    labels[10:110, 5:75], disp[10:110, 5:75] = 1, 40.0  # a large object: 36 % of the map
+    labels[60:100, 100:140], disp[60:100, 100:140] = 2, 38.0  # a smaller one
+    stats = neuron_stats(labels, disp, 3)
+    areas = find_object_areas(torch.tensor([10.0, 40.0, 38.0]), None, stats, AreaConfig())
+    ctx = _ctx(labels, disp)
+    trace = []
+    kept = kept_areas(areas, stats, labels, AreaConfig(keep_budget=0.4), ctx, trace=trace)
+    assert [a.neurons for a in kept] == [[1]]  # the first area is always kept; the second breaks the budget
+    verdicts = {tuple(c.area.neurons): c.verdict for c in trace}
+    assert verdicts[(1,)] == "kept"
+    assert verdicts[(2,)].startswith("skipped: the kept boxes would hold ") and verdicts[(2,)].endswith(
+        "% of the valid pixels > keep_budget 40 %")
+    share = int(verdicts[(2,)].split("hold ")[1].split(" %")[0])
+    assert 40 < share <= 60
+    trace = []  # with room for both, both are kept, and the trace says so
+    assert len(kept_areas(areas, stats, labels, AreaConfig(keep_budget=1.0), ctx, trace=trace)) == 2
+    assert [c.verdict for c in trace] == ["kept", "kept"]
+
+
 def test_kept_areas_keeps_further_areas_up_to_max_areas_with_their_relative_score():
     # two compact objects of similar contrast and size: both kept with max_areas=2
     h, w = 120, 160

@@ -205,6 +205,12 @@ def test_what_lies_beneath_a_verified_support_is_no_candidate():
     assert [a.neurons for a in standing_areas(result.areas, labels, stats, ctx)] == [[0]]
     assert result.kept[0].neurons == [0] and result.kept[0].box == (60, 5, 69, 14)
     assert all(a.neurons != [1] for a in result.kept)
+    # and metrics.json says why: the object kept, the patch counted as left out beneath the support
+    ranked = [(c.area.neurons, c.rank, c.verdict) for c in result.candidates if c.rank is not None]
+    assert ranked == [([0], 0, "kept")]
+    assert result.unranked.get("beneath the verified support") == 1
+    assert [(c.area.neurons, c.verdict) for c in result.candidates if c.rank is None] == \
+        [([1], "left out: it lies beneath the verified support")]  # it would have outranked the object
     # within the clutter band beneath the plane it still counts as standing on it (left-over floor
     # is the clutter filter's business, not this one's)
     shallow = torch.where(labels == 1, FLOOR_D + 9.0, disp)
