@@ -96,13 +96,14 @@ class SceneCache:
             "n_objects": len(target.masks), "valid_share": float(self.scene.valid.float().mean()),
         }
         if not overrides:  # the defaults: how far a perfect choice among the step's areas would go
-            from somtorch.evaluation import selection_ceiling
+            from somtorch.evaluation import selection_ceiling, selection_gap
 
             r = self.base.reduction
-            self.scores[key]["best_area_hits"] = selection_ceiling(
-                members, self.scene.scored_mask(self.base.object_id), self.scene.valid, s[0].x_opt,
-                tolerance_px=r.tolerance_px, tolerance_frac=r.tolerance_frac,
-                tolerance_image=r.tolerance_image)
+            args = (members, self.scene.scored_mask(self.base.object_id), self.scene.valid, s[0].x_opt)
+            tol = {"tolerance_px": r.tolerance_px, "tolerance_frac": r.tolerance_frac,
+                   "tolerance_image": r.tolerance_image}
+            self.scores[key]["best_area_hits"] = selection_ceiling(*args, **tol)
+            self.scores[key]["selection_gap"] = selection_gap(*args, **tol)  # why those runs still missed
         if saliency:
             from somtorch.saliency_metrics import saliency_scores
 

@@ -49,6 +49,10 @@ def summarize(t: Any, rows: list[dict[str, Any]]) -> dict[str, Any]:
             out["datasets"][d]["default_best_area_hits"] = v
         for label, real_only in (("real", True), ("all", False)):
             out[f"macro_{label}"]["default_best_area_hits"] = t.macro(best, real_only)[0]
+    if all("selection_gap" in r["default"] for r in rows):  # why the ceiling's other runs missed (runs)
+        for d in t.names:
+            gaps = [r["default"]["selection_gap"] for r in rows if r["dataset"] == d]
+            out["datasets"][d]["default_selection_gap"] = {k: sum(g[k] for g in gaps) for k in gaps[0]}
     return out
 
 
@@ -89,6 +93,19 @@ def to_markdown(report: dict[str, Any]) -> str:
                 for d, r in sm["datasets"].items()]
         out += [f"| **macro, {label}** | {_pct(sm[f'macro_{label}']['default_useful_hits'])} | "
                 f"{_pct(sm[f'macro_{label}']['default_best_area_hits'])} |" for label in ("real", "all")]
+    gaps = {d: r["default_selection_gap"] for d, r in sm["datasets"].items() if "default_selection_gap" in r}
+    if gaps:
+        reasons = list(next(iter(gaps.values())))
+        out += ["", "The selection gap (defaults): the runs that missed although one area's box alone would "
+                "have been a useful hit, by what became of the best-ranked such area (the verdicts of "
+                "`metrics.json`'s `candidates`; `somtorch.evaluation.selection_gap`), in runs:", "",
+                "| dataset | " + " | ".join(reasons) + " |", "|---|" + "---|" * len(reasons)]
+        out += [f"| {d} | " + " | ".join(str(g[k]) for k in reasons) + " |"
+                for d, g in gaps.items() if any(g.values())]
+        for label, real_only in (("real", True), ("all", False)):
+            tot = {k: sum(g[k] for d, g in gaps.items() if sm["datasets"][d]["real"] or not real_only)
+                   for k in reasons}
+            out.append(f"| **total, {label}** | " + " | ".join(str(tot[k]) for k in reasons) + " |")
     choice = report["in_sample_choice"]
     out += ["", f"In-sample choice: {', '.join(f'{k}={v}' for k, v in choice.items()) or 'the defaults'}.", "",
             "Left-out choices (each made without the dataset):", ""]

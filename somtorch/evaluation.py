@@ -24,8 +24,9 @@ from .tasks.ground import GroundPlane
 from .tasks.reduction import Reduction, box_count, expand_box, reduce_map, valid_integral
 from .tasks.scoring import IDENTIFIED, USEFUL_FACTOR, object_box, score_reduction
 
-__all__ = ["AllObjects", "all_objects", "ground_object_share", "merge_runs", "per_object_scores", "run_records",
-           "segment_f1", "selection_ceiling", "summarize_runs", "summary_stats"]
+__all__ = ["GAP_REASONS", "AllObjects", "all_objects", "ground_object_share", "merge_runs",
+           "per_object_scores", "run_records", "segment_f1", "selection_ceiling", "selection_gap",
+           "summarize_runs", "summary_stats"]
 
 
 def summary_stats(values: list[float]) -> dict[str, float | int | None]:
@@ -93,10 +94,72 @@ def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Ten
     Shape:
         ``object_mask``, ``valid`` ``(H, W)`` bool.
     """
+    useful = _useful_box(object_mask, valid, x_opt, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac,
+                         tolerance_image=tolerance_image, useful_factor=useful_factor)
+    if useful is None:
+        return 0
+    return sum(any(useful(a.box) for a in list(m.kept) + list(m.areas)) for m in members)
+
+
+#: The reasons :func:`selection_gap` tells apart, in the order it checks them.
+GAP_REASONS = ("kept, with further boxes", "kept, its box changed", "over the keep budget",
+               "refused by a check", "not tried", "beneath the support", "not a candidate")
+
+
+def selection_gap(members: list, object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *,
+                  tolerance_px: float, tolerance_frac: float, tolerance_image: float,
+                  useful_factor: float = USEFUL_FACTOR) -> dict[str, int]:
+    """Why the runs that :func:`selection_ceiling` counts and that still missed did miss: per run,
+    what became of its best-ranked area whose box alone would have been a useful hit, from the
+    member's :class:`~somtorch.tasks.detect.Candidate` verdicts (:data:`GAP_REASONS`): kept, but with
+    further boxes that cost the reduction; kept, but its box changed (``merge`` grew it, the refinement
+    cut it, the parts split it); over the keep budget; refused by the purity or solidity check; not
+    tried (``max_areas`` kept already, or its segments joined to an area kept before); beneath a
+    verified support; not a candidate at all (behind its surroundings or below the ``max_areas``
+    best). The counts sum to the missed runs that had such an area.
+
+    Shape:
+        ``object_mask``, ``valid`` ``(H, W)`` bool.
+    """
+    useful = _useful_box(object_mask, valid, x_opt, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac,
+                         tolerance_image=tolerance_image, useful_factor=useful_factor)
+    counts = dict.fromkeys(GAP_REASONS, 0)
+    if useful is None:
+        return counts
+    for m in members:
+        hit = m.score is not None and m.score.useful_hit
+        if not hit and any(useful(a.box) for a in list(m.kept) + list(m.areas)):
+            counts[_gap_reason(m, useful)] += 1
+    return counts
+
+
+def _gap_reason(member, useful) -> str:
+    """The :data:`GAP_REASONS` entry of a missed run that had a useful single area
+    (:func:`selection_gap`)."""
+    if any(useful(a.box) for a in member.kept):
+        return "kept, with further boxes"
+    for c in member.candidates:
+        if not useful(c.area.box):
+            continue
+        v = c.verdict
+        if v.startswith("kept"):
+            return "kept, its box changed"
+        if v.startswith("not tried"):
+            return "not tried"
+        if v.startswith("left out"):
+            return "beneath the support"
+        return "over the keep budget" if "skipped" in v else "refused by a check"
+    return "not a candidate"
+
+
+def _useful_box(object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *, tolerance_px: float,
+                tolerance_frac: float, tolerance_image: float, useful_factor: float):
+    """A test ``box -> bool``: that box alone, with the reduction's tolerance, is a useful hit (O(1)
+    per box from integral images); None where the object or the map has no valid pixel."""
     obj = object_mask & valid
     n_obj, n_valid = int(obj.sum()), int(valid.sum())
     if n_obj == 0 or n_valid == 0:
-        return 0
+        return None
     iv, io = valid_integral(valid), valid_integral(obj)
     shape = tuple(valid.shape)
 
@@ -108,7 +171,7 @@ def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Ten
         reduction = 100.0 * (1.0 - box_count(iv, b) / n_valid)
         return box_count(io, b) / n_obj >= IDENTIFIED and reduction >= useful_factor * x_opt
 
-    return sum(any(useful(a.box) for a in list(m.kept) + list(m.areas)) for m in members)
+    return useful
 
 
 def segment_f1(labels, obj) -> tuple[float, float, float]:

@@ -53,3 +53,46 @@ def test_selection_ceiling_counts_the_runs_with_a_useful_single_box(boxes):
     assert selection_ceiling([whole], obj, valid, x_opt, **tol) == 0
     # an empty object cannot be scored: no run counts
     assert selection_ceiling(res.members, torch.zeros_like(obj), valid, x_opt, **tol) == 0
+
+
+def test_selection_gap_says_what_became_of_the_useful_area_of_each_missed_run(boxes):
+    from somtorch.evaluation import GAP_REASONS, selection_gap
+    from somtorch.tasks.detect import Candidate
+
+    cfg = PipelineConfig(ensemble=6)
+    res = run_pipeline(boxes, cfg, metrics=True)
+    obj, valid, r = boxes.main_object_mask, boxes.valid, cfg.reduction
+    x_opt = optimal_reduction(obj, valid)
+    tol = dict(tolerance_px=r.tolerance_px, tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image)
+    # the counts sum to the ceiling's runs that still missed
+    gap = selection_gap(res.members, obj, valid, x_opt, **tol)
+    assert list(gap) == list(GAP_REASONS)
+    useful_in_ceiling = sum(m.score.useful_hit and selection_ceiling([m], obj, valid, x_opt, **tol) == 1
+                            for m in res.members)
+    assert sum(gap.values()) == selection_ceiling(res.members, obj, valid, x_opt, **tol) - useful_in_ceiling
+
+    h, w = valid.shape
+    main = ObjectArea([1], 1400, (20, 30, 54, 69), 30.0, 20.0, 0.13)  # the main box: useful alone
+    strip = ObjectArea([2], 4800, (60, 0, w - 1, h - 1), 24.0, 14.0, 0.44)  # the right half: the other box, wall
+    stats = res.members[0].stats
+
+    def member(kept, candidates, areas=None):
+        red = reduce_map([a.box for a in kept], valid, **tol)
+        score = score_reduction(red, obj, valid, x_opt=x_opt)
+        return MemberResult(0, areas if areas is not None else [main, strip], kept, red, score, stats,
+                            candidates=candidates)
+
+    both = member([main, strip], [Candidate(main, 2.0, 0, "kept"), Candidate(strip, 1.0, 1, "kept")])
+    assert not both.score.useful_hit  # the second box costs the reduction
+    budget = member([strip], [Candidate(strip, 2.0, 0, "kept"), Candidate(
+        main, 1.0, 1, "skipped: the kept boxes would hold 50 % of the valid pixels > keep_budget 35 %")])
+    refused = member([strip], [Candidate(strip, 2.0, 0, "kept"),
+                               Candidate(main, 1.0, 1, "refused: purity 0.10 < min_purity 0.15")])
+    unranked = member([strip], [Candidate(strip, 2.0, 0, "kept")])
+    hit = member([main], [Candidate(main, 2.0, 0, "kept")])
+    assert hit.score.useful_hit
+    got = selection_gap([both, budget, refused, unranked, hit], obj, valid, x_opt, **tol)
+    assert got == {**dict.fromkeys(GAP_REASONS, 0), "kept, with further boxes": 1, "over the keep budget": 1,
+                   "refused by a check": 1, "not a candidate": 1}
+    # without a useful area (the main box never found) the run is no part of the gap
+    assert sum(selection_gap([member([strip], [], areas=[strip])], obj, valid, x_opt, **tol).values()) == 0

@@ -237,6 +237,9 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
         d = r["default"]
         assert d["useful_hits"] + sum(d["misses"].values()) == d["runs"], d
         assert 0 <= d["best_area_hits"] <= d["runs"]  # the selection ceiling, the defaults only
+        # the gap: the ceiling's runs that missed, by reason (the ceiling may also count useful runs)
+        gap = sum(d["selection_gap"].values())
+        assert d["best_area_hits"] - d["useful_hits"] <= gap <= d["runs"] - d["useful_hits"]
     kn = rep["knobs"]["objects.merge"]
     assert kn["verdict"] in ("keep", "remove") or kn["verdict"].startswith("adopt")
     assert [e["value"] for e in kn["values"]] == [0.0, 0.5] and kn["values"][0]["neutral"]
@@ -260,6 +263,10 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     assert line.split(" | ")[4:6] == [f"{som:.1f}", f"{pcs:.1f}"], line
     assert "| plane_components useful % | uv_disparity useful % |" in md
     assert "Selection ceiling" in md and 0 <= sm["macro_real"]["default_best_area_hits"] <= 1
+    assert "The selection gap (defaults)" in md and "| **total, real** |" in md
+    assert sm["datasets"]["oakd"]["default_selection_gap"] == {
+        k: sum(r["default"]["selection_gap"][k] for r in rep["rows"] if r["dataset"] == "oakd")
+        for k in rep["rows"][0]["default"]["selection_gap"]}
     assert sorted(p.name for p in (tmp_path / "gallery").glob("*.png")) == sorted(f"{r['frame']}.png" for r in rep["rows"])
     # the task baselines (default: plane_components, uv_disparity), one run per frame, beside the defaults
     for r in rep["rows"]:
