@@ -1,5 +1,6 @@
 """``somtorch.evaluation.selection_ceiling``: a perfect choice among the object step's areas, scored
-in O(1) per box, must agree with the pipeline's own scoring of that box alone."""
+in O(1) per box, must agree with the pipeline's own scoring of that box alone; ``selection_gap``:
+why the runs it counts missed."""
 
 from __future__ import annotations
 
@@ -30,12 +31,18 @@ def boxes():
     return scene_from_arrays(d, torch.ones(90, 120, dtype=torch.bool), objects=objects, name="boxes")
 
 
-def test_selection_ceiling_counts_the_runs_with_a_useful_single_box(boxes):
+@pytest.fixture(scope="module")
+def scored(boxes):
+    """Six runs on ``boxes`` and what scoring them needs: ``(result, object, valid, x_opt, tolerances)``."""
     cfg = PipelineConfig(ensemble=6)
     res = run_pipeline(boxes, cfg, metrics=True)
     obj, valid, r = boxes.main_object_mask, boxes.valid, cfg.reduction
-    x_opt = optimal_reduction(obj, valid)
     tol = dict(tolerance_px=r.tolerance_px, tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image)
+    return res, obj, valid, optimal_reduction(obj, valid), tol
+
+
+def test_selection_ceiling_counts_the_runs_with_a_useful_single_box(scored):
+    res, obj, valid, x_opt, tol = scored
 
     def useful(box) -> bool:  # the slow way: a reduced map of that box alone, scored as a run
         return score_reduction(reduce_map([box], valid, **tol), obj, valid, x_opt=x_opt).useful_hit
@@ -55,15 +62,11 @@ def test_selection_ceiling_counts_the_runs_with_a_useful_single_box(boxes):
     assert selection_ceiling(res.members, torch.zeros_like(obj), valid, x_opt, **tol) == 0
 
 
-def test_selection_gap_says_what_became_of_the_useful_area_of_each_missed_run(boxes):
+def test_selection_gap_says_what_became_of_the_useful_area_of_each_missed_run(scored):
     from somtorch.evaluation import GAP_REASONS, selection_gap
     from somtorch.tasks.detect import Candidate
 
-    cfg = PipelineConfig(ensemble=6)
-    res = run_pipeline(boxes, cfg, metrics=True)
-    obj, valid, r = boxes.main_object_mask, boxes.valid, cfg.reduction
-    x_opt = optimal_reduction(obj, valid)
-    tol = dict(tolerance_px=r.tolerance_px, tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image)
+    res, obj, valid, x_opt, tol = scored
     # the counts sum to the ceiling's runs that still missed
     gap = selection_gap(res.members, obj, valid, x_opt, **tol)
     assert list(gap) == list(GAP_REASONS)
