@@ -103,7 +103,8 @@ def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Ten
 
 #: The reasons :func:`selection_gap` tells apart, in the order it checks them.
 GAP_REASONS = ("kept, with further boxes", "kept, its box changed", "over the keep budget",
-               "refused by a check", "not tried", "beneath the support", "not a candidate")
+               "refused by a check", "not tried", "beneath the support", "behind its surroundings",
+               "below the max_areas best")
 
 
 def selection_gap(members: list, object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *,
@@ -115,8 +116,8 @@ def selection_gap(members: list, object_mask: torch.Tensor, valid: torch.Tensor,
     further boxes that cost the reduction; kept, but its box changed (``merge`` grew it, the refinement
     cut it, the parts split it); over the keep budget; refused by the purity or solidity check; not
     tried (``max_areas`` kept already, or its segments joined to an area kept before); beneath a
-    verified support; not a candidate at all (behind its surroundings or below the ``max_areas``
-    best). The counts sum to the missed runs that had such an area.
+    verified support; or no candidate at all: behind its surroundings (contrast < 0) or below the
+    ``max_areas`` best. The counts sum to the missed runs that had such an area.
 
     Shape:
         ``object_mask``, ``valid`` ``(H, W)`` bool.
@@ -149,7 +150,8 @@ def _gap_reason(member, useful) -> str:
         if v.startswith("left out"):
             return "beneath the support"
         return "over the keep budget" if "skipped" in v else "refused by a check"
-    return "not a candidate"
+    area = next((a for a in member.areas if useful(a.box)), None)
+    return "behind its surroundings" if area is not None and area.contrast < 0 else "below the max_areas best"
 
 
 def _useful_box(object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *, tolerance_px: float,

@@ -4,6 +4,8 @@ why the runs it counts missed."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 import torch
 
@@ -96,6 +98,8 @@ def test_selection_gap_says_what_became_of_the_useful_area_of_each_missed_run(sc
     assert hit.score.useful_hit
     got = selection_gap([both, budget, refused, unranked, hit], obj, valid, x_opt, **tol)
     assert got == {**dict.fromkeys(GAP_REASONS, 0), "kept, with further boxes": 1, "over the keep budget": 1,
-                   "refused by a check": 1, "not a candidate": 1}
+                   "refused by a check": 1, "below the max_areas best": 1}
+    hidden = member([strip], [Candidate(strip, 2.0, 0, "kept")], areas=[replace(main, contrast=-1.0), strip])
+    assert selection_gap([hidden], obj, valid, x_opt, **tol)["behind its surroundings"] == 1
     # without a useful area (the main box never found) the run is no part of the gap
     assert sum(selection_gap([member([strip], [], areas=[strip])], obj, valid, x_opt, **tol).values()) == 0
