@@ -388,7 +388,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             verdicts.append(f"not tried: max_areas ({cfg.max_areas}) areas kept already")
             continue
         if bool(taken[torch.tensor(cand.neurons)].any()):
-            verdicts.append("not tried: an area kept before it joined its segments")
+            verdicts.append("not tried: some of its segments went into an area kept before it")
             continue
         confidence = rank_score(cand, cfg, on_support=on_support) / best if best > 0 else 1.0
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
