@@ -139,17 +139,11 @@ def _gap_reason(member, useful) -> str:
     (:func:`selection_gap`)."""
     if any(useful(a.box) for a in member.kept):
         return "kept, with further boxes"
+    reasons = {"kept": "kept, its box changed", "refused": "refused by a check",
+               "skipped": "over the keep budget", "not tried": "not tried", "left out": "beneath the support"}
     for c in member.candidates:
-        if not useful(c.area.box):
-            continue
-        v = c.verdict
-        if v.startswith("kept"):
-            return "kept, its box changed"
-        if v.startswith("not tried"):
-            return "not tried"
-        if v.startswith("left out"):
-            return "beneath the support"
-        return "over the keep budget" if "skipped" in v else "refused by a check"
+        if useful(c.area.box):
+            return reasons[c.outcome]
     area = next((a for a in member.areas if useful(a.box)), None)
     return "behind its surroundings" if area is not None and area.contrast < 0 else "below the max_areas best"
 

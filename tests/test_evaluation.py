@@ -89,10 +89,10 @@ def test_selection_gap_says_what_became_of_the_useful_area_of_each_missed_run(sc
 
     both = member([main, strip], [Candidate(main, 2.0, 0, "kept"), Candidate(strip, 1.0, 1, "kept")])
     assert not both.score.useful_hit  # the second box costs the reduction
-    budget = member([strip], [Candidate(strip, 2.0, 0, "kept"), Candidate(
-        main, 1.0, 1, "skipped: the kept boxes would hold 50 % of the valid pixels > keep_budget 35 %")])
+    over = "skipped: the kept boxes would hold 50 % of the valid pixels > keep_budget 35 %"
+    budget = member([strip], [Candidate(strip, 2.0, 0, "kept"), Candidate(main, 1.0, 1, over, "skipped")])
     refused = member([strip], [Candidate(strip, 2.0, 0, "kept"),
-                               Candidate(main, 1.0, 1, "refused: purity 0.10 < min_purity 0.15")])
+                               Candidate(main, 1.0, 1, "refused: purity 0.10 < min_purity 0.15", "refused")])
     unranked = member([strip], [Candidate(strip, 2.0, 0, "kept")])
     hit = member([main], [Candidate(main, 2.0, 0, "kept")])
     assert hit.score.useful_hit

@@ -32,8 +32,13 @@ from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_are
 from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, box_purity, map_solidity, merge_adjacent, refine_box, solidity_square
 
-__all__ = ["Candidate", "MapContext", "ObjectResult", "find_objects", "kept_areas", "linkable_segments",
-           "object_mode", "rank_score", "standing_areas"]
+#: The kinds of :class:`Candidate` verdict: kept; refused by the purity or solidity check; skipped by
+#: the keep budget; not tried (``max_areas`` kept already, or its segments joined to an earlier area);
+#: left out beneath a verified support.
+OUTCOMES = ("kept", "refused", "skipped", "not tried", "left out")
+
+__all__ = ["OUTCOMES", "Candidate", "MapContext", "ObjectResult", "find_objects", "kept_areas",
+           "linkable_segments", "object_mode", "rank_score", "standing_areas"]
 
 
 @dataclass
@@ -202,12 +207,15 @@ class Candidate:
     """An area the selection looked at, its rank score and what became of it (``verdict``: one line,
     e.g. ``"kept"``, ``"refused: purity 0.11 < min_purity 0.15"``, ``"skipped: the kept boxes would
     hold 61 % of the valid pixels > keep_budget 35 %"``). ``rank``: its place among the ranked
-    candidates (0 = first), None for an area the ranking left out (beneath a verified support)."""
+    candidates (0 = first), None for an area the ranking left out (beneath a verified support).
+    ``outcome``: the verdict's kind, one of :data:`OUTCOMES` (for an area split into parts:
+    ``"kept"`` if any part was kept, else the first part's)."""
 
     area: ObjectArea
     score: float
     rank: int | None
     verdict: str
+    outcome: str = "kept"
 
 
 @dataclass
@@ -271,23 +279,26 @@ def _unranked(areas: list[ObjectArea], standing: list[ObjectArea], trace: list[C
     for a in sorted(beneath, key=lambda a: -rank_score(a, cfg, on_support=on_support)):
         score = rank_score(a, cfg, on_support=on_support)
         if score > floor and a.contrast >= 0:
-            trace.append(Candidate(a, score, None, "left out: it lies beneath the verified support"))
+            line = "left out: it lies beneath the verified support"
+            trace.append(Candidate(a, score, None, line, "left out"))
     behind = sum(a.contrast < 0 for a in standing)
     counts = {"beneath the verified support": len(beneath), "behind their surroundings": behind,
               "below the max_areas best": len(standing) - behind - sum(c.rank is not None for c in trace)}
     return {k: v for k, v in counts.items() if v > 0}
 
 
-def _verdict(outcomes: list[str], joined: ObjectArea, cand: ObjectArea) -> str:
-    """One line for a candidate from the outcomes of its parts (one per part, in order)."""
+def _verdict(outcomes: list[tuple[str, str]], joined: ObjectArea, cand: ObjectArea) -> tuple[str, str]:
+    """``(verdict, outcome)`` of a candidate from the ``(outcome, line)`` of each of its parts, in order."""
     grown = len(joined.neurons) - len(cand.neurons)
     merged = f" (merge joined {grown} segment{'s' if grown != 1 else ''})" if grown else ""
+    kinds = [k for k, _ in outcomes]
+    kind = "kept" if "kept" in kinds else kinds[0]
     if len(outcomes) == 1:
-        return outcomes[0] + merged
-    n_kept = outcomes.count("kept")
+        return outcomes[0][1] + merged, kind
+    n_kept = kinds.count("kept")
     head = f"kept {n_kept} of {len(outcomes)} parts" if n_kept else f"none of {len(outcomes)} parts kept"
-    rest = "; ".join(f"part {i + 1} {o}" for i, o in enumerate(outcomes) if o != "kept")
-    return f"{head}{merged}: {rest}" if rest else head + merged
+    rest = "; ".join(f"part {i + 1} {line}" for i, (k, line) in enumerate(outcomes) if k != "kept")
+    return (f"{head}{merged}: {rest}" if rest else head + merged), kind
 
 
 def _window(box: tuple[int, int, int, int], shape: tuple[int, ...], margin: int
@@ -382,13 +393,13 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     kept, first, n_areas = [], None, 0
     square = solidity_square(labels.shape, cfg.solidity_size, 1)
     best = max((rank_score(a, cfg, on_support=on_support) for a in ranked), default=0.0)
-    verdicts: list[str] = []
+    verdicts: list[tuple[str, str]] = []
     for cand in ranked:
         if n_areas == cfg.max_areas:
-            verdicts.append(f"not tried: max_areas ({cfg.max_areas}) areas kept already")
+            verdicts.append((f"not tried: max_areas ({cfg.max_areas}) areas kept already", "not tried"))
             continue
         if bool(taken[torch.tensor(cand.neurons)].any()):
-            verdicts.append("not tried: some of its segments went into an area kept before it")
+            verdicts.append(("not tried: some of its segments went into an area kept before it", "not tried"))
             continue
         confidence = rank_score(cand, cfg, on_support=on_support) / best if best > 0 else 1.0
         joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
@@ -406,11 +417,12 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             if first is None:
                 first = done
             if done.purity < cfg.min_purity:
-                outcomes.append(f"refused: purity {done.purity:.2f} < min_purity {cfg.min_purity:g}")
+                outcomes.append(("refused", f"refused: purity {done.purity:.2f} < min_purity "
+                                            f"{cfg.min_purity:g}"))
                 continue
             if done.solidity_rel < cfg.min_solidity:
-                outcomes.append(f"refused: solidity {done.solidity_rel:.2f} × the map's < min_solidity "
-                                f"{cfg.min_solidity:g}")
+                outcomes.append(("refused", f"refused: solidity {done.solidity_rel:.2f} × the map's < "
+                                            f"min_solidity {cfg.min_solidity:g}"))
                 continue
             if kept and cfg.keep_budget < 1:
                 m_px, m_frac, m_image = ctx.margins
@@ -418,11 +430,11 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
                                    tolerance_frac=m_frac, tolerance_image=m_image, integral=ctx.integral)
                 if union.kept_union > cfg.keep_budget * max(union.valid_total, 1):
                     share = 100 * union.kept_union / max(union.valid_total, 1)
-                    outcomes.append(f"skipped: the kept boxes would hold {share:.0f} % of the valid pixels > "
-                                    f"keep_budget {100 * cfg.keep_budget:g} %")
+                    outcomes.append(("skipped", f"skipped: the kept boxes would hold {share:.0f} % of the "
+                                                f"valid pixels > keep_budget {100 * cfg.keep_budget:g} %"))
                     continue  # it would not fit the reduction budget; a smaller one may
             kept.append(done)
-            outcomes.append("kept")
+            outcomes.append(("kept", "kept"))
             any_kept = True
         verdicts.append(_verdict(outcomes, joined, cand))
         if any_kept:  # the parts of one area count as one of the max_areas
@@ -430,10 +442,10 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             n_areas += 1
     if not kept and first is not None and cfg.rule == "paper":
         kept = [first]
-        verdicts[0] = "kept: the paper rule keeps its nearest area"
+        verdicts[0] = ("kept: the paper rule keeps its nearest area", "kept")
     if trace is not None:
-        trace.extend(Candidate(c, rank_score(c, cfg, on_support=on_support), i, v)
-                     for i, (c, v) in enumerate(zip(ranked, verdicts)))
+        trace.extend(Candidate(c, rank_score(c, cfg, on_support=on_support), i, v, kind)
+                     for i, (c, (v, kind)) in enumerate(zip(ranked, verdicts)))
     for i, a in enumerate(kept):
         a.rank = i
     return kept

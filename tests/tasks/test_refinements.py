@@ -181,6 +181,7 @@ def test_every_ranked_candidate_carries_what_became_of_it():
     assert trace[0].area.neurons == [2] and trace[0].verdict.startswith("refused: purity 0.")
     assert "< min_purity 0.15" in trace[0].verdict
     assert trace[1].area.neurons == [1] and trace[1].verdict == "kept" and [a.neurons for a in kept] == [[1]]
+    assert [c.outcome for c in trace] == ["refused", "kept"]
     # one area allowed and it fails: the rest is not tried, and find_objects says so in its fallback too
     found = find_objects(labels, torch.tensor([10.0, 40.0, 90.0]), None, ctx, AreaConfig(max_areas=1))
     assert found.no_object and [c.verdict.split(":")[0] for c in found.candidates] == ["refused"]
