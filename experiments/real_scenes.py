@@ -128,6 +128,7 @@ class BaselineRun:
     score: Any
     kept: list = field(default_factory=list)
     no_object: bool = False
+    candidates: list = field(default_factory=list)  # every box it found, ranked (it keeps the first)
 
 
 def check_methods(methods: list[str], what: str = "methods") -> None:
@@ -143,7 +144,8 @@ def check_methods(methods: list[str], what: str = "methods") -> None:
 
 def run_baseline(name: str, scene: Any, reduction: Any, left_out: str | None = None) -> list[BaselineRun] | None:
     """The task baseline ``name`` (:mod:`somtorch.tasks.baselines`) on ``scene``: its first box, reduced
-    with the pipeline's tolerance (``reduction``, a ReductionConfig), scored on the main object. None
+    with the pipeline's tolerance (``reduction``, a ReductionConfig), scored on the main object (every
+    box it found in ``candidates``, for the ceiling of a perfect choice among them). None
     where it does not apply (it needs a metric camera and the scene has none). Nothing found: the
     whole map is kept and the run is flagged ``no_object``, as the pipeline's fail-safe does.
     ``left_out``: a generator camera whose frames a trained baseline must not have seen (its
@@ -163,7 +165,7 @@ def run_baseline(name: str, scene: Any, reduction: Any, left_out: str | None = N
     red = reduce_map(boxes, scene.valid, tolerance_px=reduction.tolerance_px, tolerance_frac=reduction.tolerance_frac,
                      tolerance_image=reduction.tolerance_image)
     score = score_reduction(red, scene.main_object_mask, scene.valid) if scene.main_object_mask is not None else None
-    return [BaselineRun(red, score, no_object=not found)]
+    return [BaselineRun(red, score, no_object=not found, candidates=[o.box for o in found])]
 
 
 def evaluate(cfg: ScenesConfig) -> dict[str, Any]:

@@ -26,7 +26,7 @@ from .tasks.scoring import IDENTIFIED, USEFUL_FACTOR, object_box, score_reductio
 
 __all__ = ["GAP_REASONS", "AllObjects", "all_objects", "ground_object_share", "merge_runs",
            "per_object_scores", "run_records", "segment_f1", "selection_ceiling", "selection_gap",
-           "summarize_runs", "summary_stats"]
+           "single_box_hit", "summarize_runs", "summary_stats"]
 
 
 def summary_stats(values: list[float]) -> dict[str, float | int | None]:
@@ -99,6 +99,21 @@ def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Ten
     if useful is None:
         return 0
     return sum(any(useful(a.box) for a in list(m.kept) + list(m.areas)) for m in members)
+
+
+def single_box_hit(boxes: list[tuple[int, int, int, int]], object_mask: torch.Tensor, valid: torch.Tensor,
+                   x_opt: float, *, tolerance_px: float, tolerance_frac: float, tolerance_image: float,
+                   useful_factor: float = USEFUL_FACTOR) -> bool:
+    """Whether one of ``boxes`` (``(x0, y0, x1, y1)``, inclusive) alone — with the reduction's
+    tolerance — is a useful hit: :func:`selection_ceiling` for a method that returns ranked boxes (a
+    task baseline's every component, not only the first it keeps).
+
+    Shape:
+        ``object_mask``, ``valid`` ``(H, W)`` bool.
+    """
+    useful = _useful_box(object_mask, valid, x_opt, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac,
+                         tolerance_image=tolerance_image, useful_factor=useful_factor)
+    return useful is not None and any(useful(tuple(b)) for b in boxes)
 
 
 #: The reasons :func:`selection_gap` tells apart, in the order it checks them.

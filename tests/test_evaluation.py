@@ -64,6 +64,34 @@ def test_selection_ceiling_counts_the_runs_with_a_useful_single_box(scored):
     assert selection_ceiling(res.members, torch.zeros_like(obj), valid, x_opt, **tol) == 0
 
 
+def test_single_box_hit_is_true_when_one_of_a_baseline_s_boxes_alone_is_useful(scored, boxes):
+    from somtorch.evaluation import single_box_hit
+    from somtorch.tasks.baselines.plane_components import plane_components_boxes
+
+    _, obj, valid, x_opt, tol = scored
+
+    def useful(box) -> bool:  # the slow way, as above
+        return score_reduction(reduce_map([box], valid, **tol), obj, valid, x_opt=x_opt).useful_hit
+
+    h, w = valid.shape
+    main, small, whole = (20, 30, 54, 69), (80, 20, 99, 44), (0, 0, w - 1, h - 1)
+    assert useful(main) and not useful(small) and not useful(whole)
+    assert single_box_hit([small, main], obj, valid, x_opt, **tol)  # the second of two counts
+    assert not single_box_hit([small, whole], obj, valid, x_opt, **tol)
+    assert not single_box_hit([], obj, valid, x_opt, **tol)
+    # the union of two boxes may be useful where neither alone is: one box must do it on its own
+    halves = [(20, 30, 54, 49), (20, 50, 54, 69)]
+    assert not any(useful(b) for b in halves) and useful_union(halves, valid, obj, x_opt, tol)
+    assert not single_box_hit(halves, obj, valid, x_opt, **tol)
+    # the baseline's ranked components on this scene, every one tried, agree with the slow way
+    found = [o.box for o in plane_components_boxes(boxes.disparity, boxes.valid)]
+    assert found and single_box_hit(found, obj, valid, x_opt, **tol) == any(useful(b) for b in found)
+
+
+def useful_union(boxes_, valid, obj, x_opt, tol) -> bool:
+    return score_reduction(reduce_map(boxes_, valid, **tol), obj, valid, x_opt=x_opt).useful_hit
+
+
 def test_selection_gap_says_what_became_of_the_useful_area_of_each_missed_run(scored):
     from somtorch.evaluation import GAP_REASONS, selection_gap
     from somtorch.tasks.detect import Candidate

@@ -273,10 +273,18 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
         assert list(r["baselines"]) == ["plane_components", "uv_disparity"]
         for b in r["baselines"].values():
             assert b["runs"] == 1 and 0 <= b["useful_hits"] <= b["identified_95"] <= 1 and 0 <= b["saliency"]["mae"] <= 1
+            # a useful first box is one of its boxes: the ceiling of a choice among them holds it
+            assert b["best_box_hits"] in (0, 1) and (b["no_object"] or b["best_box_hits"] >= b["useful_hits"])
     pc = rep["baselines_summary"]["plane_components"]
     per = [pc["datasets"][d]["useful_hits"] for d in ("kitti2015", "oakd", "eth3d")]
     assert pc["macro_real"]["useful_hits"] == pytest.approx(sum(per) / 3)
     assert "| | plane_components |" in md and "| kitti2015 | SOM defaults |" in md
+    # either ceiling: per frame the better of the SOM's (its runs) and the baseline's (all or none)
+    for d in ("kitti2015", "oakd", "eth3d"):
+        x = pc["datasets"][d]
+        assert max(x["best_box_hits"], sm["datasets"][d]["default_best_area_hits"]) <= x["either_best"] + 1e-9
+        assert x["either_best"] <= x["best_box_hits"] + sm["datasets"][d]["default_best_area_hits"] + 1e-9
+    assert "| dataset | method | useful | best single box | either |" in md
 
 
 def _toy_scene():
