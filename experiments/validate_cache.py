@@ -96,7 +96,7 @@ class SceneCache:
             "n_objects": len(target.masks), "valid_share": float(self.scene.valid.float().mean()),
         }
         if not overrides:  # the defaults: how far a perfect choice among the step's areas would go
-            from somtorch.evaluation import selection_ceiling, selection_gap
+            from somtorch.evaluation import grouping_ceiling, selection_ceiling, selection_gap
 
             r = self.base.reduction
             args = (members, self.scene.scored_mask(self.base.object_id), self.scene.valid, s[0].x_opt)
@@ -104,6 +104,9 @@ class SceneCache:
                    "tolerance_image": r.tolerance_image}
             self.scores[key]["best_area_hits"] = selection_ceiling(*args, **tol)
             self.scores[key]["selection_gap"] = selection_gap(*args, **tol)  # why those runs still missed
+            # ... and how far a perfect grouping of the same segments would go
+            labels = self._seg[_key({})][1].labels
+            self.scores[key]["best_grouping_hits"] = grouping_ceiling(labels, *args[1:], members=members, **tol)
         if saliency:
             from somtorch.saliency_metrics import saliency_scores
 

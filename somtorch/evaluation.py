@@ -24,9 +24,9 @@ from .tasks.ground import GroundPlane
 from .tasks.reduction import Reduction, box_count, expand_box, reduce_map, valid_integral
 from .tasks.scoring import IDENTIFIED, USEFUL_FACTOR, object_box, score_reduction
 
-__all__ = ["GAP_REASONS", "AllObjects", "all_objects", "ground_object_share", "merge_runs",
-           "per_object_scores", "run_records", "segment_f1", "selection_ceiling", "selection_gap",
-           "single_box_hit", "summarize_runs", "summary_stats"]
+__all__ = ["GAP_REASONS", "AllObjects", "all_objects", "ground_object_share", "grouping_ceiling",
+           "merge_runs", "per_object_scores", "run_records", "segment_f1", "selection_ceiling",
+           "selection_gap", "single_box_hit", "summarize_runs", "summary_stats"]
 
 
 def summary_stats(values: list[float]) -> dict[str, float | int | None]:
@@ -185,15 +185,55 @@ def _useful_box(object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *,
     return useful
 
 
+def _object_segments(labels: torch.Tensor, obj: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(pixels per segment, object pixels per segment, segments mostly on the object)``, each
+    ``(K,)``, of one label map ``(H, W)`` (−1 = no segment) and an object mask."""
+    k = max(int(labels.max()) + 1, 1) if labels.numel() else 1
+    lab = torch.where(labels >= 0, labels, k).reshape(-1).long()  # unsegmented pixels in bin k, dropped
+    cnt = torch.bincount(lab, minlength=k + 1)[:k]  # pixels per segment
+    hit = torch.bincount(lab, weights=obj.reshape(-1).double(), minlength=k + 1)[:k].long()  # object pixels
+    return cnt, hit, hit * 2 > cnt
+
+
+def grouping_ceiling(labels: torch.Tensor, object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *,
+                     tolerance_px: float, tolerance_frac: float, tolerance_image: float,
+                     members: list | None = None, useful_factor: float = USEFUL_FACTOR) -> int:
+    """How many members of ``labels`` ``(E, H, W)`` (segment per pixel, −1 = none) hold a useful hit
+    in a grouping of their segments: the box of the segments lying mostly on the object (more than
+    half of their pixels; the rule of :func:`segment_f1`), with the reduction's tolerance, is a
+    useful hit — or, given the pipeline's ``members`` (one per label map), one of the areas its
+    grouping formed is (:func:`selection_ceiling`). An oracle's grouping of the same segments beside
+    the step's own: a run counted here and not by :func:`selection_ceiling` lost the object in the
+    grouping (linked to other things, or split), not in the segmentation. (The oracle's box is not
+    refined, so it can miss where the step's refined box does: hence the step's own areas count too.)
+
+    Shape:
+        ``labels`` ``(E, H, W)``; ``object_mask``, ``valid`` ``(H, W)`` bool.
+    """
+    useful = _useful_box(object_mask, valid, x_opt, tolerance_px=tolerance_px, tolerance_frac=tolerance_frac,
+                         tolerance_image=tolerance_image, useful_factor=useful_factor)
+    if useful is None:
+        return 0
+    if members is not None and len(members) != len(labels):
+        raise ValueError(f"grouping_ceiling: {len(members)} members for {len(labels)} label maps")
+    obj = object_mask & valid
+    n = 0
+    for e, lab in enumerate(labels):
+        if members is not None and any(useful(a.box) for a in list(members[e].kept) + list(members[e].areas)):
+            n += 1
+            continue
+        _, _, major = _object_segments(lab, obj)
+        on = (lab >= 0) & major[lab.long().clamp_min(0)] & valid
+        ys, xs = on.nonzero(as_tuple=True)
+        n += bool(ys.numel()) and useful((int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())))
+    return n
+
+
 def segment_f1(labels, obj) -> tuple[float, float, float]:
     """Segmentation precision against the object mask: the union of the segments whose pixels are
     mostly object pixels, scored as precision / recall / F1 of the object's valid pixels. Finer
     segmentations follow the object's outline more closely (the paper's Fig. 13)."""
-    k = max(int(labels.max()) + 1, 1) if labels.numel() else 1
-    lab = torch.where(labels >= 0, labels, k).reshape(-1)  # invalid pixels counted in bin k, dropped
-    cnt = torch.bincount(lab, minlength=k + 1)[:k]  # pixels per segment
-    hit = torch.bincount(lab, weights=obj.reshape(-1).double(), minlength=k + 1)[:k].long()  # object pixels
-    major = hit * 2 > cnt  # segments mostly on the object
+    cnt, hit, major = _object_segments(labels, obj)  # major: segments mostly on the object
     tp = int(hit[major].sum())  # object pixels in those segments
     p = tp / max(int(cnt[major].sum()), 1)
     r = tp / max(int(hit.sum()), 1)

@@ -92,6 +92,44 @@ def useful_union(boxes_, valid, obj, x_opt, tol) -> bool:
     return score_reduction(reduce_map(boxes_, valid, **tol), obj, valid, x_opt=x_opt).useful_hit
 
 
+def test_grouping_ceiling_counts_the_runs_whose_segments_on_the_object_make_a_useful_box(scored, boxes):
+    from somtorch.evaluation import grouping_ceiling
+
+    res, obj, valid, x_opt, tol = scored
+    h, w = valid.shape
+
+    def useful(box) -> bool:  # the slow way, as above
+        return score_reduction(reduce_map([box], valid, **tol), obj, valid, x_opt=x_opt).useful_hit
+
+    def slow(lab) -> bool:  # the segments with more than half their pixels on the object, by hand
+        keep = [k for k in range(int(lab.max()) + 1)
+                if 2 * int(((lab == k) & obj).sum()) > int((lab == k).sum())]
+        on = torch.isin(lab, torch.tensor(keep, dtype=lab.dtype)) if keep else torch.zeros_like(valid)
+        ys, xs = on.nonzero(as_tuple=True)
+        return bool(len(ys)) and useful((int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max())))
+
+    assert grouping_ceiling(res.labels, obj, valid, x_opt, **tol) == sum(slow(lab) for lab in res.labels)
+    # with the members, a run counts where one of its areas or the oracle's grouping is useful
+    areas = [any(useful(a.box) for a in list(m.kept) + list(m.areas)) for m in res.members]
+    want = sum(a or slow(lab) for a, lab in zip(areas, res.labels))
+    assert grouping_ceiling(res.labels, obj, valid, x_opt, members=res.members, **tol) == want
+    assert want >= selection_ceiling(res.members, obj, valid, x_opt, **tol)
+    with pytest.raises(ValueError, match="2 members for 6 label maps"):
+        grouping_ceiling(res.labels, obj, valid, x_opt, members=res.members[:2], **tol)
+    # hand-made label maps: the object split into two segments that lie on it is a perfect grouping
+    split = torch.zeros(h, w, dtype=torch.long)
+    split[30:50, 20:55], split[50:70, 20:55] = 1, 2
+    # one segment straddling the object and as much wall beside it: no grouping of whole segments
+    straddle = torch.zeros(h, w, dtype=torch.long)
+    straddle[30:70, 20:90] = 1
+    # the object's pixels without a segment (the ground cut, say) are not a grouping either
+    unsegmented = torch.where(obj, -1, 0)
+    maps = torch.stack([split, straddle, unsegmented])
+    assert [grouping_ceiling(m[None], obj, valid, x_opt, **tol) for m in maps] == [1, 0, 0]
+    assert grouping_ceiling(maps, obj, valid, x_opt, **tol) == 1
+    assert grouping_ceiling(maps, torch.zeros_like(obj), valid, x_opt, **tol) == 0  # no object: nothing
+
+
 def test_selection_gap_says_what_became_of_the_useful_area_of_each_missed_run(scored):
     from somtorch.evaluation import GAP_REASONS, selection_gap
     from somtorch.tasks.detect import Candidate

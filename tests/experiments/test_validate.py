@@ -263,6 +263,8 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     assert line.split(" | ")[4:6] == [f"{som:.1f}", f"{pcs:.1f}"], line
     assert "| plane_components useful % | uv_disparity useful % |" in md
     assert "Selection ceiling" in md and 0 <= sm["macro_real"]["default_best_area_hits"] <= 1
+    assert 0 <= sm["macro_real"]["default_best_grouping_hits"] <= 1 and "best grouping of its segments" in md
+    assert all(0 <= r["default"]["best_grouping_hits"] <= r["default"]["runs"] for r in rep["rows"])
     assert "The selection gap (defaults)" in md and "| **total, real** |" in md
     assert sm["datasets"]["oakd"]["default_selection_gap"] == {
         k: sum(r["default"]["selection_gap"][k] for r in rep["rows"] if r["dataset"] == "oakd")
