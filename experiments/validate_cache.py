@@ -106,7 +106,8 @@ class SceneCache:
             self.scores[key]["selection_gap"] = selection_gap(*args, **tol)  # why those runs still missed
             # ... and how far a perfect grouping of the same segments would go
             labels = self._seg[_key({})][1].labels
-            self.scores[key]["best_grouping_hits"] = grouping_ceiling(labels, *args[1:], members=members, **tol)
+            self.scores[key]["best_grouping_hits"] = grouping_ceiling(labels, *args[1:], members=members,
+                                                                      **tol)
         if saliency:
             from somtorch.saliency_metrics import saliency_scores
 

@@ -185,7 +185,8 @@ def _useful_box(object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *,
     return useful
 
 
-def _object_segments(labels: torch.Tensor, obj: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _object_segments(labels: torch.Tensor, obj: torch.Tensor
+                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``(pixels per segment, object pixels per segment, segments mostly on the object)``, each
     ``(K,)``, of one label map ``(H, W)`` (−1 = no segment) and an object mask."""
     k = max(int(labels.max()) + 1, 1) if labels.numel() else 1
