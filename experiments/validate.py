@@ -329,6 +329,10 @@ def main(dcfg: DictConfig) -> int:
     log.info("real macro useful-hit rate: default %.1f %%, in-sample %.1f %%, left-out %.1f %% (all-objects "
              "%.1f / %.1f / %.1f %%); tables in %s", *(100 * m[f"{p}_{r}"] for r in ("useful_hits", "all_objects_hits")
                                                    for p in ("default", "in_sample", "left_out")), out / "validate.md")
+    if "default_best_grouping_hits" in m:
+        log.info("real macro ceilings of the defaults: a perfect choice among the areas %.1f %%, a perfect "
+                 "grouping of the segments %.1f %%", 100 * m["default_best_area_hits"],
+                 100 * m["default_best_grouping_hits"])
     return 0
 
 
