@@ -266,8 +266,9 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     assert 0 <= sm["macro_real"]["default_best_grouping_hits"] <= 1 and "best grouping of its segments" in md
     # the closing lines name both ceilings in % (the log goes to the run folder and the terminal)
     log_text = proc.stdout + proc.stderr + "".join(p.read_text() for p in tmp_path.glob("*.log"))
-    want = (f"a perfect choice among the areas {100 * sm['macro_real']['default_best_area_hits']:.1f} %, a perfect "
-            f"grouping of the segments {100 * sm['macro_real']['default_best_grouping_hits']:.1f} %")
+    mr = sm["macro_real"]
+    want = (f"a perfect choice among the areas {100 * mr['default_best_area_hits']:.1f} %, a perfect "
+            f"grouping of the segments {100 * mr['default_best_grouping_hits']:.1f} %")
     assert want in log_text, log_text[-1500:]
     assert all(0 <= r["default"]["best_grouping_hits"] <= r["default"]["runs"] for r in rep["rows"])
     assert "The selection gap (defaults)" in md and "| **total, real** |" in md
