@@ -127,7 +127,7 @@ def selection_gap(members: list, object_mask: torch.Tensor, valid: torch.Tensor,
                   useful_factor: float = USEFUL_FACTOR) -> dict[str, int]:
     """Why the runs that :func:`selection_ceiling` counts and that still missed did miss: per run,
     what became of its best-ranked area whose box alone would have been a useful hit, from the
-    member's :class:`~somtorch.tasks.detect.Candidate` verdicts (:data:`GAP_REASONS`): kept, but with
+    member's :class:`~somtorch.tasks.candidates.Candidate` verdicts (:data:`GAP_REASONS`): kept, but with
     further boxes that cost the reduction; kept, but its box changed (``merge`` grew it, the refinement
     cut it, the parts split it); over the keep budget; refused by the purity or solidity check; not
     tried (``max_areas`` kept already, or its segments joined to an area kept before); beneath a

@@ -53,7 +53,7 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "reduction_crops": m.reduction.reduction_crops,
             "no_object": m.no_object,
             "kept_everything": m.reduction.reduction_union < 1.0,
-            # what became of each area the selection looked at (tasks.detect.Candidate), best first
+            # what became of each area the selection looked at (tasks.candidates.Candidate), best first
             "candidates": [{"rank": c.rank, "score": c.score, "verdict": c.verdict, "pixels": c.area.pixels,
                             "box_xyxy": list(c.area.box), "mean_disparity": c.area.mean_disparity,
                             "contrast": c.area.contrast} for c in m.candidates],

@@ -31,7 +31,8 @@ from .disparity.filters import median_filter, median_noise
 from .disparity.scene import Scene
 from .resources import Estimate, estimate
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
-from .tasks.detect import Candidate, MapContext, find_objects
+from .tasks.candidates import Candidate
+from .tasks.detect import MapContext, find_objects
 from .tasks.ground import GroundPlane, fit_ground_plane, noise_sigma
 from .tasks.objects import NeuronStats, ObjectArea
 from .tasks.reduction import Reduction, reduce_map, valid_integral
@@ -57,7 +58,7 @@ class MemberResult:
     stats: NeuronStats
     no_object: bool = False  # nothing convincing was found: the whole map is kept
     # what became of each area the selection looked at, and how many it left out by reason
-    # (tasks.detect.Candidate, ObjectResult.unranked): metrics.json's "candidates"
+    # (tasks.candidates.Candidate, ObjectResult.unranked): metrics.json's "candidates"
     candidates: list[Candidate] = field(default_factory=list)
     unranked: dict[str, int] = field(default_factory=dict)
 

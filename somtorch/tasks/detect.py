@@ -26,16 +26,12 @@ import torch
 
 from ..config import AreaConfig, ReductionConfig
 from ..config.objects import CONTINUOUS_SHARE
+from .candidates import OUTCOMES, Candidate, unranked_areas, verdict
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
                       pair_continuity, rank_score, select_areas, surround_pairs)
 from .reduction import reduce_map, valid_integral
 from .refine import _opened_share, box_purity, map_solidity, merge_adjacent, refine_box, solidity_square
-
-#: The kinds of :class:`Candidate` verdict: kept; refused by the purity or solidity check; skipped by
-#: the keep budget; not tried (``max_areas`` kept already, or its segments joined to an earlier area);
-#: left out beneath a verified support.
-OUTCOMES = ("kept", "refused", "skipped", "not tried", "left out")
 
 __all__ = ["OUTCOMES", "Candidate", "MapContext", "ObjectResult", "find_objects", "kept_areas",
            "linkable_segments", "object_mode", "rank_score", "standing_areas"]
@@ -203,22 +199,6 @@ def standing_areas(areas: list[ObjectArea], labels: torch.Tensor, stats: NeuronS
 
 
 @dataclass
-class Candidate:
-    """An area the selection looked at, its rank score and what became of it (``verdict``: one line,
-    e.g. ``"kept"``, ``"refused: purity 0.11 < min_purity 0.15"``, ``"skipped: the kept boxes would
-    hold 61 % of the valid pixels > keep_budget 35 %"``). ``rank``: its place among the ranked
-    candidates (0 = first), None for an area the ranking left out (beneath a verified support).
-    ``outcome``: the verdict's kind, one of :data:`OUTCOMES` (for an area split into parts:
-    ``"kept"`` if any part was kept, else the first part's)."""
-
-    area: ObjectArea
-    score: float
-    rank: int | None
-    verdict: str
-    outcome: str = "kept"
-
-
-@dataclass
 class ObjectResult:
     """One member's object step: every area, the kept ones (best first), and whether it fell back;
     ``candidates``: the ranked candidates and the areas beneath a verified support that would have
@@ -254,7 +234,7 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
     standing = standing_areas(areas, labels, stats, ctx)  # all where no support
     trace: list[Candidate] = []
     kept = kept_areas(standing, stats, labels, cfg, ctx, trace=trace)
-    unranked = _unranked(areas, standing, trace, cfg, on_support)
+    unranked = unranked_areas(areas, standing, trace, cfg, on_support)
     if kept:
         return ObjectResult(stats, areas, kept, candidates=trace, unranked=unranked)
     # nothing convincing: keep the whole map rather than nothing
@@ -263,42 +243,6 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
     whole = ObjectArea(sorted({int(v) for v in labels.unique().tolist()} - {-1}), int(ctx.valid.sum()), box,
                        float(torch.masked_select(ctx.disparity, ctx.valid).mean()) if ys.numel() else 0.0, 0.0, 1.0, 0, confidence=0.0)
     return ObjectResult(stats, areas, [whole], no_object=True, candidates=trace, unranked=unranked)
-
-
-def _unranked(areas: list[ObjectArea], standing: list[ObjectArea], trace: list[Candidate], cfg: AreaConfig,
-              on_support: bool) -> dict[str, int]:
-    """Add to ``trace`` the areas beneath a verified support (not in ``standing``) that score above the
-    last ranked candidate (they would have been tried), and count the areas left out of the ranking:
-    beneath the support, behind their surroundings (contrast < 0), below the ``max_areas`` best."""
-    if cfg.rule == "paper":
-        return {}
-    standing_ids = {id(a) for a in standing}
-    beneath = [a for a in areas if id(a) not in standing_ids]
-    full = len(trace) >= cfg.max_areas  # else a further candidate would have been tried, whatever its score
-    floor = min((c.score for c in trace), default=float("-inf")) if full else float("-inf")
-    for a in sorted(beneath, key=lambda a: -rank_score(a, cfg, on_support=on_support)):
-        score = rank_score(a, cfg, on_support=on_support)
-        if score > floor and a.contrast >= 0:
-            line = "left out: it lies beneath the verified support"
-            trace.append(Candidate(a, score, None, line, "left out"))
-    behind = sum(a.contrast < 0 for a in standing)
-    counts = {"beneath the verified support": len(beneath), "behind their surroundings": behind,
-              "below the max_areas best": len(standing) - behind - sum(c.rank is not None for c in trace)}
-    return {k: v for k, v in counts.items() if v > 0}
-
-
-def _verdict(outcomes: list[tuple[str, str]], joined: ObjectArea, cand: ObjectArea) -> tuple[str, str]:
-    """``(verdict, outcome)`` of a candidate from the ``(outcome, line)`` of each of its parts, in order."""
-    grown = len(joined.neurons) - len(cand.neurons)
-    merged = f" (merge joined {grown} segment{'s' if grown != 1 else ''})" if grown else ""
-    kinds = [k for k, _ in outcomes]
-    kind = "kept" if "kept" in kinds else kinds[0]
-    if len(outcomes) == 1:
-        return outcomes[0][1] + merged, kind
-    n_kept = kinds.count("kept")
-    head = f"kept {n_kept} of {len(outcomes)} parts" if n_kept else f"none of {len(outcomes)} parts kept"
-    rest = "; ".join(f"part {i + 1} {line}" for i, (k, line) in enumerate(outcomes) if k != "kept")
-    return (f"{head}{merged}: {rest}" if rest else head + merged), kind
 
 
 def _window(box: tuple[int, int, int, int], shape: tuple[int, ...], margin: int
@@ -436,7 +380,7 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             kept.append(done)
             outcomes.append(("kept", "kept"))
             any_kept = True
-        verdicts.append(_verdict(outcomes, joined, cand))
+        verdicts.append(verdict(outcomes, joined, cand))
         if any_kept:  # the parts of one area count as one of the max_areas
             taken[torch.tensor(joined.neurons)] = True
             n_areas += 1
