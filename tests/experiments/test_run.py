@@ -279,8 +279,8 @@ def test_a_run_killed_with_sigterm_leaves_no_staging_folder(tmp_path):
         time.sleep(0.05)
     assert p.poll() is None, "the run ended before it could be killed"
     p.send_signal(signal.SIGTERM)
-    p.communicate(timeout=120)
-    assert p.returncode == 128 + signal.SIGTERM
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 128 + signal.SIGTERM, err[-3000:]  # (a failure shows where the signal landed)
     assert not list(tmp_path.glob(".partial-*")) and not (tmp_path / ".lock").exists()
     assert not (tmp_path / "metrics.json").exists()
 
