@@ -138,14 +138,23 @@ def log_to_file(log: logging.Logger, level: int, msg: str, *args: object) -> Non
 @contextlib.contextmanager
 def one_line_errors(log: logging.Logger) -> Iterator[None]:
     """Bad input at the command line ends in one line (the message and a hint), exit status 2; the
-    full traceback with ``HYDRA_FULL_ERROR=1``. Unexpected errors keep their traceback."""
+    full traceback with ``HYDRA_FULL_ERROR=1``. Unexpected errors keep their traceback.
+
+    A stop asked for by a signal comes first: an error raised after SIGINT / SIGTERM arrived (a
+    library that turned the :class:`~somtorch.interrupt.Interrupted` into an error of its own, a
+    clean-up that failed while the run unwound) is the interruption's consequence, not bad input,
+    so it is raised as the interruption (130 / 143, ``FAILED``, one line), the error chained to it."""
     from omegaconf.errors import OmegaConfBaseException
 
+    from somtorch import interrupt
     from somtorch.validation import SomtorchError
 
     try:
         yield
     except (ValueError, TypeError, FileNotFoundError, RuntimeError, SomtorchError, OmegaConfBaseException) as err:
+        signum = interrupt.requested()
+        if signum is not None:
+            raise interrupt.Interrupted(signum, interrupt.where()) from err
         if os.environ.get("HYDRA_FULL_ERROR") == "1":
             raise
         msg = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from concurrent.futures import ProcessPoolExecutor
 
 __all__ = ["Interrupted", "checkpoint", "deferred", "install", "leave_to_parent", "note", "requested", "reset",
-           "worker_pool"]
+           "where", "worker_pool"]
 
 
 class Interrupted(BaseException):
@@ -125,6 +125,11 @@ def reset() -> None:
 def requested() -> int | None:
     """The pending signal's number, or None."""
     return _state.signum
+
+
+def where() -> str:
+    """The last progress note (:func:`note`)."""
+    return _state.where
 
 
 def note(where: str) -> None:

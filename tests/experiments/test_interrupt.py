@@ -132,3 +132,49 @@ except interrupt.Interrupted as e:
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "interrupted (SIGINT) after the callback"
     assert out.stderr == ""
+
+
+def test_an_error_raised_after_a_signal_ends_as_the_interruption_not_as_bad_input(tmp_path):
+    # a library that turns whatever stops it into an error of its own (or a clean-up that fails while
+    # the run unwinds) must not turn a SIGTERM into "error: ..." and exit status 2 (a CI run of
+    # session 29 got 2 where 143 was due): the signal came first, so the run ends as interrupted
+    code = f"""
+import logging, os, signal, time
+from pathlib import Path
+from experiments.cli import interruptible
+from experiments.schema import one_line_errors
+from somtorch import interrupt
+
+def library_call():
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(30)
+    except BaseException as e:
+        raise RuntimeError("the library's own error") from e
+
+with interruptible(Path({str(tmp_path)!r})), one_line_errors(logging.getLogger("t")):
+    interrupt.note("during stage train")
+    library_call()
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert out.returncode == 128 + signal.SIGTERM, out.stderr
+    assert out.stderr.strip() == (f"interrupted (SIGTERM) during stage train; partial results not written; "
+                                  f"{tmp_path / 'FAILED'}"), out.stderr
+    assert (tmp_path / "FAILED").read_text().startswith("interrupted (SIGTERM) during stage train")
+
+
+def test_bad_input_without_a_signal_still_ends_with_exit_status_2(tmp_path):
+    code = f"""
+import logging
+from pathlib import Path
+from experiments.cli import interruptible
+from experiments.schema import one_line_errors
+
+with interruptible(Path({str(tmp_path)!r})), one_line_errors(logging.getLogger("t")):
+    raise ValueError("som.rows=0: expected at least 1")
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.startswith("error: som.rows=0: expected at least 1"), out.stderr
