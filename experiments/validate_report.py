@@ -51,6 +51,12 @@ def summarize(t: Any, rows: list[dict[str, Any]]) -> dict[str, Any]:
             out["datasets"][d][f"default_{ceiling}"] = v
         for label, real_only in (("real", True), ("all", False)):
             out[f"macro_{label}"][f"default_{ceiling}"] = t.macro(best, real_only)[0]
+    for d in t.names:  # how the defaults' other runs missed, in runs (wrong object, partial, too much kept)
+        got = [r["default"] for r in rows if r["dataset"] == d and "misses" in r["default"]]
+        if got:
+            out["datasets"][d]["default_misses"] = {
+                "useful": sum(g["useful_hits"] for g in got), **{k: sum(g["misses"][k] for g in got)
+                                                                for k in got[0]["misses"]}}
     if all("selection_gap" in r["default"] for r in rows):  # why the ceiling's other runs missed (runs)
         for d in t.names:
             gaps = [r["default"]["selection_gap"] for r in rows if r["dataset"] == d]
@@ -102,6 +108,20 @@ def to_markdown(report: dict[str, Any]) -> str:
                 f"{_pct(sm[f'macro_{label}']['default_best_area_hits'])} | "
                 f"{_pct(sm[f'macro_{label}'].get('default_best_grouping_hits', nan))} |"
                 for label in ("real", "all")]
+    misses = {d: r["default_misses"] for d, r in sm["datasets"].items() if "default_misses" in r}
+    if misses:
+        out += ["", "How the other runs missed (defaults), in runs: the main object kept < 50 % (another "
+                "thing kept instead), 50-95 % (split, or its box cut short), or >= 95 % with a reduction "
+                "under 0.75 x x_opt (too much kept beside it):", "",
+                "| dataset | runs | useful | < 50 % kept | 50-95 % kept | too much kept |",
+                "|---|---|---|---|---|---|"]
+        cols = ("useful", "wrong", "partial", "too_much")
+        out += [f"| {d} | {sm['datasets'][d]['runs']} | " + " | ".join(str(m[k]) for k in cols) + " |"
+                for d, m in misses.items()]
+        for label, real_only in (("real", True), ("all", False)):
+            ds = [d for d in misses if sm["datasets"][d]["real"] or not real_only]
+            out.append(f"| **total, {label}** | {sum(sm['datasets'][d]['runs'] for d in ds)} | "
+                       + " | ".join(str(sum(misses[d][k] for d in ds)) for k in cols) + " |")
     gaps = {d: r["default_selection_gap"] for d, r in sm["datasets"].items() if "default_selection_gap" in r}
     if gaps:
         reasons = list(next(iter(gaps.values())))

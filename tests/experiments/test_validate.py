@@ -272,6 +272,16 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     assert want in log_text, log_text[-1500:]
     assert all(0 <= r["default"]["best_grouping_hits"] <= r["default"]["runs"] for r in rep["rows"])
     assert "The selection gap (defaults)" in md and "| **total, real** |" in md
+    # how the other runs missed: per dataset the frames' counts summed, and the runs add up
+    for d, got in sm["datasets"].items():
+        m = got["default_misses"]
+        rows_d = [r["default"] for r in rep["rows"] if r["dataset"] == d]
+        assert m == {"useful": sum(r["useful_hits"] for r in rows_d),
+                     **{k: sum(r["misses"][k] for r in rows_d) for k in ("wrong", "partial", "too_much")}}
+        assert sum(m.values()) == got["runs"]
+        line = f"| {d} | {got['runs']} | {m['useful']} | {m['wrong']} | {m['partial']} | {m['too_much']} |"
+        assert line in md, md
+    assert "How the other runs missed (defaults)" in md
     assert sm["datasets"]["oakd"]["default_selection_gap"] == {
         k: sum(r["default"]["selection_gap"][k] for r in rep["rows"] if r["dataset"] == "oakd")
         for k in rep["rows"][0]["default"]["selection_gap"]}
