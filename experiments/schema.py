@@ -143,7 +143,8 @@ def one_line_errors(log: logging.Logger) -> Iterator[None]:
     A stop asked for by a signal comes first: an error raised after SIGINT / SIGTERM arrived (a
     library that turned the :class:`~somtorch.interrupt.Interrupted` into an error of its own, a
     clean-up that failed while the run unwound) is the interruption's consequence, not bad input,
-    so it is raised as the interruption (130 / 143, ``FAILED``, one line), the error chained to it."""
+    so it is raised as the interruption, the error chained to it: one line and 130 / 143 (and
+    ``FAILED`` where :func:`experiments.cli.interruptible` holds the output folder)."""
     from omegaconf.errors import OmegaConfBaseException
 
     from somtorch import interrupt
