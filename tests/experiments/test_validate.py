@@ -282,6 +282,11 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
         line = f"| {d} | {got['runs']} | {m['useful']} | {m['wrong']} | {m['partial']} | {m['too_much']} |"
         assert line in md, md
     assert "How the other runs missed (defaults)" in md
+    real_m = [g["default_misses"] for g in sm["datasets"].values() if g["real"]]
+    tot = {k: sum(m[k] for m in real_m) for k in real_m[0]}
+    want = (f"real runs of the defaults: {tot['useful']} useful; of the others {tot['wrong']} kept < 50 % of the "
+            f"main object, {tot['partial']} 50-95 %, {tot['too_much']} all of it with too much beside it")
+    assert want in log_text, log_text[-1500:]
     assert sm["datasets"]["oakd"]["default_selection_gap"] == {
         k: sum(r["default"]["selection_gap"][k] for r in rep["rows"] if r["dataset"] == "oakd")
         for k in rep["rows"][0]["default"]["selection_gap"]}
