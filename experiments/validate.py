@@ -337,9 +337,9 @@ def main(dcfg: DictConfig) -> int:
             if d["real"] and "default_misses" in d]
     if miss:  # how the other real runs missed (validate.md: per dataset)
         tot = {k: sum(x[k] for x in miss) for k in miss[0]}
-        log.info("real runs of the defaults: %d useful; of the others %d kept < 50 %% of the main object, %d "
-                 "50-95 %%, %d all of it with too much beside it", tot["useful"], tot["wrong"], tot["partial"],
-                 tot["too_much"])
+        log.info("real runs of the defaults: %d useful of %d; the others kept < 50 %% of the main object (%d), "
+                 "50-95 %% of it (%d), or all of it with too much beside it (%d)", tot["useful"], sum(tot.values()),
+                 tot["wrong"], tot["partial"], tot["too_much"])
     return 0
 
 

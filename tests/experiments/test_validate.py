@@ -284,8 +284,9 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     assert "How the other runs missed (defaults)" in md
     real_m = [g["default_misses"] for g in sm["datasets"].values() if g["real"]]
     tot = {k: sum(m[k] for m in real_m) for k in real_m[0]}
-    want = (f"real runs of the defaults: {tot['useful']} useful; of the others {tot['wrong']} kept < 50 % of the "
-            f"main object, {tot['partial']} 50-95 %, {tot['too_much']} all of it with too much beside it")
+    want = (f"real runs of the defaults: {tot['useful']} useful of {sum(tot.values())}; the others kept < 50 % of "
+            f"the main object ({tot['wrong']}), 50-95 % of it ({tot['partial']}), or all of it with too much beside "
+            f"it ({tot['too_much']})")
     assert want in log_text, log_text[-1500:]
     assert sm["datasets"]["oakd"]["default_selection_gap"] == {
         k: sum(r["default"]["selection_gap"][k] for r in rep["rows"] if r["dataset"] == "oakd")
