@@ -98,7 +98,13 @@ def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Ten
                          tolerance_image=tolerance_image, useful_factor=useful_factor)
     if useful is None:
         return 0
-    return sum(any(useful(a.box) for a in list(m.kept) + list(m.areas)) for m in members)
+    return sum(_holds_useful(m, useful) for m in members)
+
+
+def _holds_useful(member: Any, useful: Any) -> bool:
+    """Whether one of ``member``'s kept areas or of the areas its grouping formed has a box that
+    ``useful`` (a :func:`_useful_box` test) counts."""
+    return any(useful(a.box) for a in list(member.kept) + list(member.areas))
 
 
 def single_box_hit(boxes: list[tuple[int, int, int, int]], object_mask: torch.Tensor, valid: torch.Tensor,
@@ -220,7 +226,7 @@ def grouping_ceiling(labels: torch.Tensor, object_mask: torch.Tensor, valid: tor
     obj = object_mask & valid
     n = 0
     for e, lab in enumerate(labels):
-        if members is not None and any(useful(a.box) for a in list(members[e].kept) + list(members[e].areas)):
+        if members is not None and _holds_useful(members[e], useful):
             n += 1
             continue
         _, _, major = _object_segments(lab, obj)
