@@ -333,10 +333,8 @@ def main(dcfg: DictConfig) -> int:
         log.info("real macro ceilings of the defaults: a perfect choice among the areas %.1f %%, a perfect "
                  "grouping of the segments %.1f %%", 100 * m["default_best_area_hits"],
                  100 * m["default_best_grouping_hits"])
-    miss = [d["default_misses"] for d in report["summary"]["datasets"].values()
-            if d["real"] and "default_misses" in d]
-    if miss:  # how the other real runs missed (validate.md: per dataset)
-        tot = {k: sum(x[k] for x in miss) for k in miss[0]}
+    tot = m.get("default_misses")
+    if tot:  # how the other real runs missed (validate.md: per dataset)
         log.info("real runs of the defaults: %d useful of %d; the others kept < 50 %% of the main object (%d), "
                  "50-95 %% of it (%d), or all of it with too much beside it (%d)", tot["useful"], sum(tot.values()),
                  tot["wrong"], tot["partial"], tot["too_much"])

@@ -57,6 +57,11 @@ def summarize(t: Any, rows: list[dict[str, Any]]) -> dict[str, Any]:
             out["datasets"][d]["default_misses"] = {
                 "useful": sum(g["useful_hits"] for g in got), **{k: sum(g["misses"][k] for g in got)
                                                                 for k in got[0]["misses"]}}
+    missed = {d: r["default_misses"] for d, r in out["datasets"].items() if "default_misses" in r}
+    for label, real_only in (("real", True), ("all", False)):  # their totals, in runs (not a macro)
+        ds = [d for d in missed if out["datasets"][d]["real"] or not real_only]
+        if ds:
+            out[f"macro_{label}"]["default_misses"] = {k: sum(missed[d][k] for d in ds) for k in missed[ds[0]]}
     if all("selection_gap" in r["default"] for r in rows):  # why the ceiling's other runs missed (runs)
         for d in t.names:
             gaps = [r["default"]["selection_gap"] for r in rows if r["dataset"] == d]
@@ -118,10 +123,11 @@ def to_markdown(report: dict[str, Any]) -> str:
         cols = ("useful", "wrong", "partial", "too_much")
         out += [f"| {d} | {sm['datasets'][d]['runs']} | " + " | ".join(str(m[k]) for k in cols) + " |"
                 for d, m in misses.items()]
-        for label, real_only in (("real", True), ("all", False)):
-            ds = [d for d in misses if sm["datasets"][d]["real"] or not real_only]
-            out.append(f"| **total, {label}** | {sum(sm['datasets'][d]['runs'] for d in ds)} | "
-                       + " | ".join(str(sum(misses[d][k] for d in ds)) for k in cols) + " |")
+        for label in ("real", "all"):
+            tot = sm[f"macro_{label}"].get("default_misses")
+            if tot:
+                out.append(f"| **total, {label}** | {sum(tot.values())} | "
+                           + " | ".join(str(tot[k]) for k in cols) + " |")
     gaps = {d: r["default_selection_gap"] for d, r in sm["datasets"].items() if "default_selection_gap" in r}
     if gaps:
         reasons = list(next(iter(gaps.values())))
