@@ -34,9 +34,8 @@ class Candidate:
     outcome: str = "kept"
 
 
-
-def unranked_areas(areas: list[ObjectArea], standing: list[ObjectArea], trace: list[Candidate], cfg: AreaConfig,
-              on_support: bool) -> dict[str, int]:
+def unranked_areas(areas: list[ObjectArea], standing: list[ObjectArea], trace: list[Candidate],
+                   cfg: AreaConfig, on_support: bool) -> dict[str, int]:
     """Add to ``trace`` the areas beneath a verified support (not in ``standing``) that score above the
     last ranked candidate (they would have been tried), and count the areas left out of the ranking:
     beneath the support, behind their surroundings (contrast < 0), below the ``max_areas`` best."""
