@@ -106,7 +106,9 @@ class AreaConfig(Validated):
         rule: ``"salient"``: neurons link where their segments share a boundary in the image (at
             least ``min_boundary``), the spread is the 5th–95th percentile of the map's disparity,
             the areas in front of their surroundings are ranked by contrast ×
-            ``area_frac ** size_power`` (on a map whose support plane was verified and cut, the
+            ``area_frac ** size_power``, the contrast read as the geometric mean of the area's own
+            and that of the area as ``merge`` grows it (what the refinement keeps of it; session
+            31, no field) (on a map whose support plane was verified and cut, the
             areas standing on it or above it, by size × nearness: ``area_frac ×`` mean disparity)
             and up to ``max_areas`` are kept; when
             no candidate passes the checks below, the whole map is kept (flagged ``no_object``).

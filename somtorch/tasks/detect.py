@@ -31,7 +31,8 @@ from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
                       pair_continuity, rank_score, select_areas, surround_pairs)
 from .reduction import reduce_map, valid_integral
-from .refine import _opened_share, box_purity, map_solidity, merge_adjacent, refine_box, solidity_square
+from .refine import (_opened_share, box_purity, map_solidity, merge_adjacent, refine_box, solidity_square,
+                     with_grown_contrast)
 
 __all__ = ["OUTCOMES", "Candidate", "MapContext", "ObjectResult", "find_objects", "kept_areas",
            "linkable_segments", "object_mode", "rank_score", "standing_areas"]
@@ -332,6 +333,8 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
         ``labels`` ``(H, W)``.
     """
     on_support = ctx.islands is not None  # a support-verified plane was cut: size × nearness
+    if not on_support and cfg.rule != "paper":  # ranked by contrast: of the area and of what merge keeps
+        areas = with_grown_contrast([a for a in areas if a.contrast >= 0], stats, cfg)
     ranked = select_areas(areas, stats, cfg, on_support=on_support)
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first, n_areas = [], None, 0

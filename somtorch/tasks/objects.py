@@ -23,7 +23,9 @@ Linking and selection follow ``AreaConfig.rule``:
   it in a forward view — it says nothing about the object's salience and is left out. Without
   that, an object the ground cut isolates from every segment had no contrast at all. The areas in
   front of their surroundings (contrast ≥ 0) are ranked by contrast × ``area_frac ** size_power``,
-  at most ``max_areas``; on a map whose support plane was verified and cut (``on_support``: what
+  at most ``max_areas``, where :func:`~somtorch.tasks.detect.kept_areas` has measured what ``merge``
+  keeps of each (its ``grown_contrast``) the contrast read as the geometric mean of the two
+  (:func:`rank_score`); on a map whose support plane was verified and cut (``on_support``: what
   is left stands on it) by size × nearness, ``area_frac ×`` mean disparity — the biggest nearest
   thing on the support, the ``plane_components`` baseline's choice (session 17, docs/validation.md).
 
@@ -34,6 +36,7 @@ selection and those steps in order.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -104,6 +107,7 @@ class ObjectArea:
     solidity: float | None = None  # share of its pixels an opening keeps (refine.solidity), in [0, 1]
     solidity_rel: float | None = None  # that share over the map's own (what objects.min_solidity tests)
     confidence: float | None = None  # rank score relative to the best candidate's (1 = best)
+    grown_contrast: float | None = None  # contrast of the area as merge grows it (refine.with_grown_contrast)
 
     def mask(self, labels: torch.Tensor) -> torch.Tensor:
         """The area's pixels: the union of its neurons' segments. ``labels`` ``(H, W)`` → ``(H, W)`` bool."""
@@ -376,8 +380,14 @@ def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | 
 
 
 def rank_score(area: ObjectArea, cfg: AreaConfig, *, on_support: bool = False) -> float:
-    """The salient ranking's score: ``contrast × area_frac ** size_power``; on a map whose support
-    plane was verified and cut (``on_support``), ``area_frac ×`` mean disparity (size × nearness)."""
+    """The salient ranking's score: ``contrast × area_frac ** size_power``, where the area's
+    ``grown_contrast`` is known the geometric mean ``√(contrast × max(grown_contrast, 0))`` in place of
+    its contrast (it stands out, and so does what ``merge`` keeps of it:
+    :func:`~somtorch.tasks.refine.with_grown_contrast`); on a map whose support plane was verified
+    and cut (``on_support``), ``area_frac ×`` mean disparity (size × nearness)."""
     if on_support:
         return area.area_frac * area.mean_disparity
-    return area.contrast * area.area_frac ** cfg.size_power
+    salience = area.contrast
+    if area.grown_contrast is not None:
+        salience = math.sqrt(max(area.contrast, 0.0) * max(area.grown_contrast, 0.0))
+    return salience * area.area_frac ** cfg.size_power

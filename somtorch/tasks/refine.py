@@ -20,10 +20,34 @@ from dataclasses import replace
 import torch
 
 from ..config import AreaConfig
-from .objects import NeuronStats, ObjectArea, label_mask
+from .objects import NeuronStats, ObjectArea, areas_of, label_mask
 from .reduction import box_count
 
 _D = AreaConfig  # the defaults of the helpers below are those of the config
+
+
+def _grown(areas: list[ObjectArea], stats: NeuronStats, ratio: float, min_boundary: float, group: torch.Tensor,
+           blocked: torch.Tensor | None = None) -> torch.Tensor:
+    """``merge``'s growth of each area from its segments ``group`` ``(A, K)`` bool, ring by ring until
+    nothing joins (see :func:`merge_adjacent`): a segment joins where its mean disparity is within
+    ``ratio ×`` the area's contrast of the area's and its boundary with the group is at least
+    ``min_boundary`` of its perimeter; none of ``blocked`` ``(K,)`` joins. The areas grow
+    independently. Returns the grown ``(A, K)``."""
+    mean_d = torch.nan_to_num(stats.mean_d, nan=float("inf"))  # empty segments never join
+    own = torch.tensor([a.mean_disparity for a in areas], dtype=mean_d.dtype)
+    tol = ratio * torch.tensor([max(a.contrast, 0.0) for a in areas], dtype=mean_d.dtype)
+    may = (mean_d[None, :] - own[:, None]).abs() <= tol[:, None]
+    if blocked is not None:
+        may &= ~blocked[None, :]
+    floor = min_boundary * stats.perimeter
+    boundary = stats.boundary.double()
+    group = group.clone()
+    while True:
+        shared = group.double() @ boundary  # (A, K): each segment's boundary with each growing group
+        ring = ~group & may & (shared > 0) & (shared >= floor[None, :])
+        if not bool(ring.any()):
+            return group
+        group |= ring
 
 
 def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float = _D.merge,
@@ -49,8 +73,6 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
     if ratio <= 0 or not kept:
         return kept
     k = int(stats.count.shape[0])
-    per = stats.perimeter
-    mean_d = torch.nan_to_num(stats.mean_d, nan=float("inf"))  # empty segments never join
     total = float(stats.count.sum())
     taken = torch.zeros(k, dtype=torch.bool) if exclude is None else exclude.clone()
     out = []
@@ -59,13 +81,7 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
         group[torch.tensor(a.neurons)] = True
         if bool((group & taken).any()):
             continue
-        similar = (mean_d - a.mean_disparity).abs() <= ratio * max(a.contrast, 0.0)
-        while True:
-            shared = stats.boundary[:, group].sum(1)
-            ring = ~group & ~taken & similar & (shared > 0) & (shared >= min_boundary * per)
-            if not bool(ring.any()):
-                break
-            group |= ring
+        group = _grown([a], stats, ratio, min_boundary, group[None], blocked=taken)[0]
         taken |= group
         added = int(group.sum()) - len(a.neurons)
         if added == 0:
@@ -82,6 +98,23 @@ def merge_adjacent(kept: list[ObjectArea], stats: NeuronStats, *, ratio: float =
     for i, a in enumerate(out):
         a.rank = i
     return out
+
+
+def with_grown_contrast(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig) -> list[ObjectArea]:
+    """``areas`` with their ``grown_contrast``: the contrast (:func:`~somtorch.tasks.objects.areas_of`)
+    of each area as :func:`merge_adjacent` grows it alone (``cfg.merge``, ``cfg.min_boundary``), what
+    the refinement would keep of it. The salient ranking reads it beside the area's own contrast
+    (:func:`~somtorch.tasks.objects.rank_score`): an area beside an object, a table's front strip, whose
+    growth swallows the object and the surface around it, stands out less once grown than the object's
+    own area does (session 31, ``docs/validation.md``). ``areas`` as they are where ``cfg.merge`` is 0."""
+    if cfg.merge <= 0 or not areas:
+        return areas
+    group = torch.zeros(len(areas), int(stats.count.shape[0]), dtype=torch.bool)
+    for i, a in enumerate(areas):
+        group[i, a.neurons] = True
+    group = _grown(areas, stats, cfg.merge, cfg.min_boundary, group)  # each alone, all at once
+    grown = areas_of([row.nonzero().flatten().tolist() for row in group], stats)
+    return [replace(a, grown_contrast=g.contrast) for a, g in zip(areas, grown)]
 
 
 def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.box_coverage,
