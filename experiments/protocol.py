@@ -20,7 +20,10 @@ The rule (``decide``), for a candidate against the defaults on the same frames a
   "evidence decides" clause (the real difference is then exactly zero);
 * a knob whose *neutral* value (the check switched off) passes the non-inferiority test —
   lower bound of the real macro difference above ``-ni_margin`` in both readings and no dataset
-  losing more than ``loss_margin`` — is not needed and is **removed**.
+  losing more than ``loss_margin`` — is not needed and is **removed**, unless the wider evidence
+  refutes the removal: the macro average over every dataset of the paired main-object difference
+  has its whole interval below zero (``Decision.removable``; the second path's mirror, session 31:
+  the real corpus cannot tell, every dataset can).
 
 The bootstrap resamples, within each dataset, its groups (the underlying scenes: a GT and an SGBM
 version of one scene move together) with replacement; the per-dataset means are then averaged. A
@@ -124,11 +127,12 @@ class Decision:
     worst: tuple[str, float]  # the dataset of the largest loss (either reading) and that loss
     reasons: list[str]
     path: str = ""  # "real": adopted by the real macro gain; "all": non-inferior on real, superior on all
+    removable: bool = False  # as a neutral value: non-inferior on real, and not worse over every dataset
 
     def as_dict(self) -> dict[str, Any]:
         return {"adopt": self.adopt, "non_inferior": self.non_inferior, "useful": self.useful,
                 "all_objects": self.all_objects, "useful_all": self.useful_all, "worst": self.worst,
-                "reasons": self.reasons, "path": self.path}
+                "reasons": self.reasons, "path": self.path, "removable": self.removable}
 
 
 def decide(table: FrameTable, cand_useful: np.ndarray, base_useful: np.ndarray, cand_all: np.ndarray,
@@ -156,9 +160,11 @@ def decide(table: FrameTable, cand_useful: np.ndarray, base_useful: np.ndarray, 
         # the second path: non-inferior on the real datasets, superior over every dataset
         path, reasons = "all", []
     return Decision(adopt=bool(path), non_inferior=ni, useful=useful, all_objects=allobj,
-                    useful_all=useful_all, worst=worst, reasons=reasons, path=path)
+                    useful_all=useful_all, worst=worst, reasons=reasons, path=path,
+                    removable=ni and useful_all[2] >= 0)
 
 
 def non_inferior(d: Decision) -> bool:
-    """Whether a simplification (a check switched off) costs nothing the protocol can see."""
-    return d.non_inferior
+    """Whether a simplification (a check switched off) costs nothing the protocol can see: non-inferior
+    on the real datasets, and not shown to cost over every dataset (:attr:`Decision.removable`)."""
+    return d.removable

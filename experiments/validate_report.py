@@ -14,12 +14,13 @@ __all__ = ["gallery", "summarize", "to_markdown", "verdict"]
 
 def verdict(key: str, entries: list[dict[str, Any]], in_sample: dict[str, Any], neutral: dict[str, Any]) -> str:
     """``adopt <value>`` (the in-sample choice changed it), ``remove`` (its neutral value is
-    non-inferior), or ``keep``."""
+    non-inferior on the real data and not shown to cost over every dataset:
+    :attr:`~experiments.protocol.Decision.removable`), or ``keep``."""
     names = key.split("+")
     if any(n in in_sample for n in names):
         return "adopt " + ", ".join(f"{n}={in_sample[n]}" for n in names if n in in_sample)
     off = [e for e in entries if e["neutral"]]
-    if key in neutral and (not off or off[0]["non_inferior"]):
+    if key in neutral and (not off or off[0]["removable"]):
         return "remove"
     return "keep"
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from experiments.datasets import datasets, frames, load_frame
-from experiments.protocol import FrameTable, decide
+from experiments.protocol import FrameTable, decide, non_inferior
+from experiments.validate_report import verdict
 from experiments.validate import SceneCache
 from somtorch.config import with_overrides
 from somtorch.config import PipelineConfig
@@ -128,6 +129,28 @@ def test_non_inferior_on_real_and_superior_on_all_is_adopted_by_the_second_path(
     cand = base.copy()
     cand[:20] += 0.3
     assert decide(t, cand, base, cand, base).path == "real"
+
+
+def test_a_removal_that_costs_over_every_dataset_is_not_taken():
+    # a check switched off: no real frame changes (non-inferior on real), but the synthetic datasets
+    # lose on 4 of 10 frames each, an all-dataset interval wholly below zero: the wider evidence
+    # refutes the removal (the second path's mirror); with the synthetic loss gone it is removable
+    t = _table({"a": 10, "b": 10, "s1": 10, "s2": 10}, [True, True, False, False])
+    base = np.full(40, 0.5)
+    off = base.copy()
+    off[[20, 21, 22, 23, 30, 31, 32, 33]] -= 0.2
+    d = decide(t, off, base, off, base)
+    assert d.non_inferior and d.useful == (0.0, 0.0, 0.0) and d.useful_all[2] < 0, d
+    assert not d.removable and not non_inferior(d) and not d.adopt
+    assert verdict("k", [{"neutral": True, **d.as_dict()}], {}, {"k": 0.0}) == "keep"
+    off = base.copy()
+    off[[20, 31]] -= 0.2  # a loss the interval cannot tell from none
+    d = decide(t, off, base, off, base)
+    assert d.removable and d.useful_all[1] < 0 <= d.useful_all[2], d
+    assert verdict("k", [{"neutral": True, **d.as_dict()}], {}, {"k": 0.0}) == "remove"
+    # a real loss beyond the margin is no removal, whatever the rest says
+    off[[0, 1, 2, 3, 4, 5]] -= 0.3
+    assert not decide(t, off, base, off, base).removable
 
 
 def test_the_all_objects_reading_may_not_drop():
