@@ -44,7 +44,8 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             "kept_areas": [{"neurons": a.neurons, "pixels": a.pixels, "box_xyxy": list(a.box),
                             "mean_disparity": a.mean_disparity, "contrast": a.contrast,
                             "area_frac": a.area_frac,
-                            **{k: _finite(getattr(a, k)) for k in ("purity", "solidity", "solidity_rel", "confidence")}}
+                            **{k: _finite(getattr(a, k)) for k in ("purity", "solidity", "solidity_rel",
+                                                                    "confidence", "grown_contrast")}}
                            for a in m.kept],
             "kept_boxes_xyxy": [list(b) for b in m.reduction.boxes],
             "kept_valid_union": m.reduction.kept_union,
@@ -56,7 +57,8 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             # what became of each area the selection looked at (tasks.candidates.Candidate), best first
             "candidates": [{"rank": c.rank, "score": c.score, "verdict": c.verdict, "pixels": c.area.pixels,
                             "box_xyxy": list(c.area.box), "mean_disparity": c.area.mean_disparity,
-                            "contrast": c.area.contrast} for c in m.candidates],
+                            "contrast": c.area.contrast, "grown_contrast": _finite(c.area.grown_contrast)}
+                           for c in m.candidates],
             "areas_not_ranked": dict(m.unranked),
             "score": m.score.as_dict() if m.score is not None else None,
         })

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import cv2
 import numpy as np
@@ -79,7 +80,21 @@ def test_summarize_is_json_ready_with_the_documented_keys(motorcycle, result):
         assert kept["purity"] == res.kept[0].purity and 0 < kept["purity"] <= 1
         assert kept["solidity"] == res.kept[0].solidity and 0 < kept["solidity"] <= 1
         assert kept["solidity_rel"] == res.kept[0].solidity_rel > 0
+        assert kept["grown_contrast"] is None  # the paper's rule ranks by nearness: not measured
         assert mem["score"] is None
+
+
+def test_summarize_gives_each_candidates_contrast_and_that_of_what_merge_keeps(motorcycle):
+    # the salient rule's ranking reads both (rank_score): a reader of metrics.json can redo its score
+    r = run_pipeline(motorcycle, PipelineConfig(train=TrainConfig(mode="batch", epochs=3), ensemble=1, seed=1))
+    (mem,), (res,) = summarize(motorcycle, r)["members"], r.members
+    assert len(mem["candidates"]) >= 2
+    assert [c["grown_contrast"] for c in mem["candidates"]] == [c.area.grown_contrast for c in res.candidates]
+    assert all(c["grown_contrast"] is not None for c in mem["candidates"])
+    assert [c["score"] for c in mem["candidates"]] == pytest.approx(
+        [math.sqrt(max(c.area.contrast, 0) * max(c.area.grown_contrast, 0)) * c.area.area_frac ** 0.25
+         for c in res.candidates])
+    assert mem["kept_areas"][0]["grown_contrast"] == res.kept[0].grown_contrast is not None
 
 
 def test_summarize_maps_nan_errors_to_null(motorcycle):

@@ -23,9 +23,10 @@ Linking and selection follow ``AreaConfig.rule``:
   it in a forward view — it says nothing about the object's salience and is left out. Without
   that, an object the ground cut isolates from every segment had no contrast at all. The areas in
   front of their surroundings (contrast ≥ 0) are ranked by contrast × ``area_frac ** size_power``,
-  at most ``max_areas``, where :func:`~somtorch.tasks.detect.kept_areas` has measured what ``merge``
-  keeps of each (its ``grown_contrast``) the contrast read as the geometric mean of the two
-  (:func:`rank_score`); on a map whose support plane was verified and cut (``on_support``: what
+  at most ``max_areas``; the contrast there is the geometric mean of the area's own and that of
+  what ``merge`` keeps of it (its ``grown_contrast``, which
+  :func:`~somtorch.tasks.detect.kept_areas` measures: :func:`rank_score`); on a map whose support
+  plane was verified and cut (``on_support``: what
   is left stands on it) by size × nearness, ``area_frac ×`` mean disparity — the biggest nearest
   thing on the support, the ``plane_components`` baseline's choice (session 17, docs/validation.md).
 
@@ -380,11 +381,11 @@ def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | 
 
 
 def rank_score(area: ObjectArea, cfg: AreaConfig, *, on_support: bool = False) -> float:
-    """The salient ranking's score: ``contrast × area_frac ** size_power``, where the area's
-    ``grown_contrast`` is known the geometric mean ``√(contrast × max(grown_contrast, 0))`` in place of
-    its contrast (it stands out, and so does what ``merge`` keeps of it:
-    :func:`~somtorch.tasks.refine.with_grown_contrast`); on a map whose support plane was verified
-    and cut (``on_support``), ``area_frac ×`` mean disparity (size × nearness)."""
+    """The salient ranking's score: ``contrast × area_frac ** size_power``; where the area carries its
+    ``grown_contrast`` (:func:`~somtorch.tasks.refine.with_grown_contrast`), the geometric mean
+    ``√(contrast × max(grown_contrast, 0))`` takes the contrast's place: the area stands out, and so
+    does what ``merge`` keeps of it. On a map whose support plane was verified and cut
+    (``on_support``), ``area_frac ×`` mean disparity (size × nearness)."""
     if on_support:
         return area.area_frac * area.mean_disparity
     salience = area.contrast

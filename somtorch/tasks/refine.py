@@ -26,8 +26,8 @@ from .reduction import box_count
 _D = AreaConfig  # the defaults of the helpers below are those of the config
 
 
-def _grown(areas: list[ObjectArea], stats: NeuronStats, ratio: float, min_boundary: float, group: torch.Tensor,
-           blocked: torch.Tensor | None = None) -> torch.Tensor:
+def _grown(areas: list[ObjectArea], stats: NeuronStats, ratio: float, min_boundary: float,
+           group: torch.Tensor, blocked: torch.Tensor | None = None) -> torch.Tensor:
     """``merge``'s growth of each area from its segments ``group`` ``(A, K)`` bool, ring by ring until
     nothing joins (see :func:`merge_adjacent`): a segment joins where its mean disparity is within
     ``ratio ×`` the area's contrast of the area's and its boundary with the group is at least
@@ -114,7 +114,7 @@ def with_grown_contrast(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaCo
         group[i, a.neurons] = True
     group = _grown(areas, stats, cfg.merge, cfg.min_boundary, group)  # each alone, all at once
     grown = areas_of([row.nonzero().flatten().tolist() for row in group], stats)
-    return [replace(a, grown_contrast=g.contrast) for a, g in zip(areas, grown)]
+    return [replace(a, grown_contrast=g.contrast) for a, g in zip(areas, grown, strict=True)]
 
 
 def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.box_coverage,
