@@ -43,7 +43,9 @@ def _grown(areas: list[ObjectArea], stats: NeuronStats, ratio: float, min_bounda
     boundary = stats.boundary.double()
     group = group.clone()
     while True:
-        shared = group.double() @ boundary  # (A, K): each segment's boundary with each growing group
+        # (A, K): each segment's boundary with each growing group; pixel-pair counts in float64 are
+        # whole numbers, exact in any order of summation: the same bits from any BLAS kernel
+        shared = group.double() @ boundary
         ring = ~group & may & (shared > 0) & (shared >= floor[None, :])
         if not bool(ring.any()):
             return group
