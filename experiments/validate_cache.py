@@ -39,9 +39,10 @@ class SceneCache:
         """The frame's scene, loaded again (and not kept) where this cache does not hold it."""
         return self._scene if self._scene is not None else self._loader()
 
-    def members(self, overrides: dict[str, Any]) -> tuple[Any, list]:
+    def members(self, overrides: dict[str, Any], first_place: bool = False) -> tuple[Any, list]:
         """``(ground plane, member results)`` of the base config with ``overrides``; the segmentation
-        is computed once per upstream setting (features, ground, SOM, training)."""
+        is computed once per upstream setting (features, ground, SOM, training). ``first_place``:
+        each member's :attr:`~somtorch.pipeline.MemberResult.first_place` is set too."""
         from dataclasses import replace
 
         import torch
@@ -66,7 +67,8 @@ class SceneCache:
         scene = self.scene
         if window:  # the map the segmentation read (features.median): only a noisy frame's
             scene = replace(scene, disparity=median_filter(scene.disparity, scene.valid, window))
-        return ground, detect(scene, replace(seg, labels=seg.labels.long()), ground, cfg)
+        return ground, detect(scene, replace(seg, labels=seg.labels.long()), ground, cfg,
+                              first_place_ceiling=first_place)
 
     def score(self, overrides: dict[str, Any], saliency: bool = False) -> dict[str, Any]:
         """Counts over the members with ``overrides`` (cached per key); ``saliency`` adds the mean
@@ -76,7 +78,7 @@ class SceneCache:
         key = _key(overrides)
         if key in self.scores and (not saliency or "saliency" in self.scores[key]):
             return self.scores[key]
-        ground, members = self.members(overrides)
+        ground, members = self.members(overrides, first_place=not overrides)  # the defaults: the ceilings
         if self._target is None:
             self._target = all_objects(self.scene)
         target = self._target
@@ -103,6 +105,8 @@ class SceneCache:
             tol = {"tolerance_px": r.tolerance_px, "tolerance_frac": r.tolerance_frac,
                    "tolerance_image": r.tolerance_image}
             self.scores[key]["best_area_hits"] = selection_ceiling(*args, **tol)
+            # ... and a perfect ranking: each candidate tried first (somtorch.tasks.detect.first_place)
+            self.scores[key]["first_place_hits"] = sum(bool(m.first_place) for m in members)
             self.scores[key]["selection_gap"] = selection_gap(*args, **tol)  # why those runs still missed
             # ... and how far a perfect grouping of the same segments would go
             labels = self._seg[_key({})][1].labels

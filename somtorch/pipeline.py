@@ -32,7 +32,7 @@ from .disparity.scene import Scene
 from .resources import Estimate, estimate
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
 from .tasks.candidates import Candidate
-from .tasks.detect import MapContext, find_objects
+from .tasks.detect import MapContext, find_objects, first_place
 from .tasks.ground import GroundPlane, fit_ground_plane, noise_sigma
 from .tasks.objects import NeuronStats, ObjectArea
 from .tasks.reduction import Reduction, reduce_map, valid_integral
@@ -61,6 +61,9 @@ class MemberResult:
     # (tasks.candidates.Candidate, ObjectResult.unranked): metrics.json's "candidates"
     candidates: list[Candidate] = field(default_factory=list)
     unranked: dict[str, int] = field(default_factory=dict)
+    # whether a perfect ranking of its candidates would have made it useful (detect(...,
+    # first_place_ceiling=True): tasks.detect.first_place); None where not asked for or nothing to score
+    first_place: bool | None = None
 
 
 @dataclass
@@ -266,9 +269,11 @@ def on_support(scene: Scene, ground: GroundPlane | None,
 
 
 def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: PipelineConfig,
-           timer: _Timer | None = None) -> list[MemberResult]:
+           timer: _Timer | None = None, *, first_place_ceiling: bool = False) -> list[MemberResult]:
     """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d), on the scene
-    and plane of :func:`on_support` (``ground`` as fitted)."""
+    and plane of :func:`on_support` (``ground`` as fitted). ``first_place_ceiling``: on a scene with a
+    labelled object, also set each member's :attr:`MemberResult.first_place` (an analysis: each
+    candidate tried first until one makes the run useful; seconds per scene)."""
     timer = timer or _Timer()
     scene, ground = on_support(scene, ground, cfg.features)
     st = map_stride(scene, cfg)
@@ -288,6 +293,7 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
         interrupt.checkpoint(f"in the object step, member {e + 1}/{seg.labels.shape[0]}")
         with timer("objects"):
             found = find_objects(labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, ocfg)
+            grid_areas = found.areas  # on the object step's grid, for first_place below
             if st > 1:
                 found.areas = [_full_size(a, st, h, w) for a in found.areas]
                 found.kept = [_full_size(a, st, h, w) for a in found.kept]
@@ -297,8 +303,17 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
                              tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image,
                              integral=integral)
         score = score_reduction(red, obj_mask, scene.valid, x_opt=x_opt) if obj_mask is not None else None
+        first = None
+        if first_place_ceiling and score is not None:
+            def useful(kept: list[ObjectArea]) -> bool:  # what the reduced map would keep, scored
+                boxes = [_full_size(a, st, h, w).box for a in kept] or [(0, 0, w - 1, h - 1)]
+                got = reduce_map(boxes, scene.valid, tolerance_px=r.tolerance_px,
+                                 tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image,
+                                 integral=integral)
+                return score_reduction(got, obj_mask, scene.valid, x_opt=x_opt).useful_hit
+            first = score.useful_hit or first_place(grid_areas, found.stats, labels[e], ocfg, ctx, useful)
         members.append(MemberResult(seg.seeds[e], found.areas, found.kept, red, score, found.stats,
-                                    found.no_object, found.candidates, found.unranked))
+                                    found.no_object, found.candidates, found.unranked, first))
     _warn_fallbacks(scene.name, members)
     return members
 

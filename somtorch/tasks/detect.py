@@ -20,6 +20,7 @@ is recorded as a :class:`Candidate` per area the selection looked at (``metrics.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import torch
@@ -34,7 +35,7 @@ from .reduction import reduce_map, valid_integral
 from .refine import (_opened_share, box_purity, map_solidity, merge_adjacent, refine_box, solidity_square,
                      with_grown_contrast)
 
-__all__ = ["OUTCOMES", "Candidate", "MapContext", "ObjectResult", "find_objects", "kept_areas",
+__all__ = ["OUTCOMES", "Candidate", "MapContext", "ObjectResult", "find_objects", "first_place", "kept_areas",
            "linkable_segments", "object_mode", "rank_score", "standing_areas"]
 
 
@@ -246,6 +247,28 @@ def find_objects(labels: torch.Tensor, ref_disparity: torch.Tensor, grid_d2: tor
     return ObjectResult(stats, areas, [whole], no_object=True, candidates=trace, unranked=unranked)
 
 
+def first_place(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
+                ctx: MapContext, useful: Callable[[list[ObjectArea]], bool]) -> bool:
+    """Whether a perfect ranking of this member's candidates would have made it useful: each candidate
+    the ranking sees (``areas`` as :func:`find_objects` found them; on a support-verified map those
+    standing on it) is tried first, in rank order, the others following it, and joined, refined,
+    checked and budgeted by :func:`kept_areas` as the step does, until ``useful(kept)`` holds (an
+    empty ``kept``: the step keeps the whole map). The ceiling of the ranking alone: unlike
+    :func:`~somtorch.evaluation.selection_ceiling`, which scores each area's bare box, it counts what
+    the step would keep. The areas are copied: their ``rank`` is not touched.
+
+    Shape:
+        ``labels`` ``(H, W)`` long (−1 not segmented).
+    """
+    standing = [replace(a) for a in standing_areas(areas, labels, stats, ctx)]
+    if cfg.rule == "paper":
+        return useful(kept_areas(standing, stats, labels, cfg, ctx))
+    on_support = ctx.islands is not None
+    order = sorted((a for a in standing if a.contrast >= 0),
+                   key=lambda a: -rank_score(a, cfg, on_support=on_support))
+    return any(useful(kept_areas(standing, stats, labels, cfg, ctx, try_first=a.neurons)) for a in order)
+
+
 def _window(box: tuple[int, int, int, int], shape: tuple[int, ...], margin: int
             ) -> tuple[tuple[slice, slice], tuple[int, int]]:
     """The ``(rows, cols)`` slices of ``box`` (x0, y0, x1, y1, inclusive) widened by ``margin`` px and
@@ -305,7 +328,8 @@ def _refined(joined: ObjectArea, part: torch.Tensor, labels: torch.Tensor, win: 
 
 
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
-               ctx: MapContext, *, trace: list[Candidate] | None = None) -> list[ObjectArea]:
+               ctx: MapContext, *, trace: list[Candidate] | None = None,
+               try_first: list[int] | None = None) -> list[ObjectArea]:
     """Select, join, refine and check the candidates in rank order.
 
     Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with segments of
@@ -329,6 +353,10 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     ``trace``: a list that receives a :class:`Candidate` per ranked candidate, in rank order, with
     what became of it (kept, refused by which check, skipped by the budget, not tried).
 
+    ``try_first``: the neurons of one of ``areas`` to try first, whatever its rank (an analysis of the
+    ranking: :func:`first_place`); the others follow in rank order, ``cfg.max_areas`` in all. Not
+    used under ``rule="paper"``, which keeps one area.
+
     Shape:
         ``labels`` ``(H, W)``.
     """
@@ -336,6 +364,15 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     if not on_support and cfg.rule != "paper":  # ranked by contrast: of the area and of what merge keeps
         areas = with_grown_contrast([a for a in areas if a.contrast >= 0], stats, cfg)
     ranked = select_areas(areas, stats, cfg, on_support=on_support)
+    if try_first is not None and cfg.rule != "paper":
+        pool = sorted((a for a in areas if a.contrast >= 0),
+                      key=lambda a: -rank_score(a, cfg, on_support=on_support))
+        lead = [a for a in pool if a.neurons == try_first]
+        if not lead:
+            raise ValueError(f"kept_areas(try_first={try_first}): no candidate area has these neurons")
+        ranked = (lead + [a for a in pool if a is not lead[0]])[:cfg.max_areas]
+        for i, a in enumerate(ranked):
+            a.rank = i
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first, n_areas = [], None, 0
     square = solidity_square(labels.shape, cfg.solidity_size, 1)

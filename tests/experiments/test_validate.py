@@ -260,6 +260,7 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
         d = r["default"]
         assert d["useful_hits"] + sum(d["misses"].values()) == d["runs"], d
         assert 0 <= d["best_area_hits"] <= d["runs"]  # the selection ceiling, the defaults only
+        assert d["useful_hits"] <= d["first_place_hits"] <= d["runs"]  # a perfect ranking's ceiling
         # the gap: the ceiling's runs that missed, by reason (the ceiling may also count useful runs)
         gap = sum(d["selection_gap"].values())
         assert d["best_area_hits"] - d["useful_hits"] <= gap <= d["runs"] - d["useful_hits"]
@@ -290,8 +291,11 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
     # the closing lines name both ceilings in % (the log goes to the run folder and the terminal)
     log_text = proc.stdout + proc.stderr + "".join(p.read_text() for p in tmp_path.glob("*.log"))
     mr = sm["macro_real"]
-    want = (f"a perfect choice among the areas {100 * mr['default_best_area_hits']:.1f} %, a perfect "
+    want = (f"a perfect ranking of the candidates {100 * mr['default_first_place_hits']:.1f} %, a perfect "
+            f"choice among the areas {100 * mr['default_best_area_hits']:.1f} %, a perfect "
             f"grouping of the segments {100 * mr['default_best_grouping_hits']:.1f} %")
+    assert mr["default_useful_hits"] <= mr["default_first_place_hits"] <= 1
+    assert "| dataset | default useful | best candidate first | best single area |" in md
     assert want in log_text, log_text[-1500:]
     assert all(0 <= r["default"]["best_grouping_hits"] <= r["default"]["runs"] for r in rep["rows"])
     assert "The selection gap (defaults)" in md and "| **total, real** |" in md

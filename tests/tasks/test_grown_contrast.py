@@ -13,6 +13,8 @@ from somtorch.tasks.detect import MapContext, kept_areas
 from somtorch.tasks.objects import AreaConfig, areas_of, find_object_areas, neuron_stats, rank_score, select_areas
 from somtorch.tasks.refine import merge_adjacent, with_grown_contrast
 
+from .toys import flat_segments
+
 H, W = 60, 120
 DEPTH = {0: 10.0, 1: 30.0, 2: 40.0, 3: 28.0, 4: 20.0}
 
@@ -26,11 +28,7 @@ def _strip_beside_a_surface():
     labels[:, 60:] = 4
     labels[10:50, 60:110] = 3
     labels[10:50, 50:60] = 2
-    disp = torch.zeros(H, W)
-    for k, v in DEPTH.items():
-        disp[labels == k] = v
-    stats = neuron_stats(labels, disp, len(DEPTH))
-    areas = find_object_areas(torch.tensor([DEPTH[k] for k in range(len(DEPTH))]), None, stats, AreaConfig())
+    disp, stats, areas = flat_segments(labels, DEPTH)
     return labels, disp, stats, areas
 
 
