@@ -332,7 +332,7 @@ def main(dcfg: DictConfig) -> int:
     if "default_best_grouping_hits" in m:
         log.info("real macro ceilings of the defaults: a perfect ranking of the candidates %.1f %%, "
                  "a perfect choice among the areas %.1f %%, a perfect grouping of the segments %.1f %%",
-                 100 * m["default_first_place_hits"], 100 * m["default_best_area_hits"],
+                 100 * m.get("default_first_place_hits", float("nan")), 100 * m["default_best_area_hits"],
                  100 * m["default_best_grouping_hits"])
     tot = m.get("default_misses")
     if tot:  # how the other real runs missed (validate.md: per dataset)
