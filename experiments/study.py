@@ -166,8 +166,9 @@ def _execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[st
     from somtorch import __version__
     from somtorch.atomic import commit_staged, write_json
     from somtorch.disparity.resize import resize_scene
+    from somtorch.fallbacks import fallback_summary
     from somtorch.outputs import train_strides, write_maps
-    from somtorch.pipeline import fallback_summary, run_pipeline
+    from somtorch.pipeline import run_pipeline
 
     chash = job_hash(cfg, config)
     if cfg.skip_complete:

@@ -15,7 +15,6 @@ import logging
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from contextvars import ContextVar
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -29,6 +28,7 @@ from .core.threads import contended
 from .disparity.features import Features, make_features, relative_disparity
 from .disparity.filters import median_filter, median_noise
 from .disparity.scene import Scene
+from .fallbacks import fallback_summary, warn_fallbacks  # noqa: F401  (fallback_summary: its old home)
 from .resources import Estimate, estimate
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
 from .tasks.candidates import Candidate
@@ -298,63 +298,22 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
                 found.areas = [_full_size(a, st, h, w) for a in found.areas]
                 found.kept = [_full_size(a, st, h, w) for a in found.kept]
                 found.candidates = [replace(c, area=_full_size(c.area, st, h, w)) for c in found.candidates]
+        def reduced(boxes: list[tuple[int, int, int, int]]) -> Reduction:  # step 1d on the full map
+            return reduce_map(boxes, scene.valid, tolerance_px=r.tolerance_px, tolerance_frac=r.tolerance_frac,
+                              tolerance_image=r.tolerance_image, integral=integral)
         with timer("reduction"):
-            red = reduce_map([a.box for a in found.kept], scene.valid, tolerance_px=r.tolerance_px,
-                             tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image,
-                             integral=integral)
+            red = reduced([a.box for a in found.kept])
         score = score_reduction(red, obj_mask, scene.valid, x_opt=x_opt) if obj_mask is not None else None
         first = None
         if first_place_ceiling and score is not None:
-            def useful(kept: list[ObjectArea]) -> bool:  # what the reduced map would keep, scored
-                boxes = [_full_size(a, st, h, w).box for a in kept] or [(0, 0, w - 1, h - 1)]
-                got = reduce_map(boxes, scene.valid, tolerance_px=r.tolerance_px,
-                                 tolerance_frac=r.tolerance_frac, tolerance_image=r.tolerance_image,
-                                 integral=integral)
+            def useful(kept: list[ObjectArea]) -> bool:  # what the reduced map would keep (nothing: all)
+                got = reduced([_full_size(a, st, h, w).box for a in kept] or [(0, 0, w - 1, h - 1)])
                 return score_reduction(got, obj_mask, scene.valid, x_opt=x_opt).useful_hit
             first = score.useful_hit or first_place(grid_areas, found.stats, labels[e], ocfg, ctx, useful)
         members.append(MemberResult(seg.seeds[e], found.areas, found.kept, red, score, found.stats,
                                     found.no_object, found.candidates, found.unranked, first))
-    _warn_fallbacks(scene.name, members)
+    warn_fallbacks(scene.name, members)
     return members
-
-
-_summary: ContextVar[list[int] | None] = ContextVar("fallback_summary", default=None)
-
-
-def _warn_fallbacks(name: str, members: list[MemberResult]) -> None:
-    """One warning line for the members that kept (nearly) everything, one for those that found no
-    object; inside :func:`fallback_summary` only counted, for its one line at the end."""
-    everything = [i for i, m in enumerate(members) if not m.no_object and m.reduction.reduction_union < 1.0]
-    fallback = sum(m.no_object for m in members)
-    counts = _summary.get()
-    if counts is not None:
-        counts[0] += len(everything)
-        counts[1] += fallback
-        counts[2] += len(members)
-        return
-    if everything:
-        log.warning("scene %s: member(s) %s keep %s of the valid pixels (reduction < 1 %%): the kept areas cover "
-                    "the whole map", name, everything[:5], "all or nearly all")
-    if fallback:
-        log.warning("scene %s: %d of %d member(s) found no convincing object area; the whole map is kept "
-                    "(flagged no_object)", name, fallback, len(members))
-
-
-@contextmanager
-def fallback_summary(name: str) -> Iterator[list[int]]:
-    """Many pipeline calls on one scene (the separate runs of a study job) warn once, at the end:
-    ``scene S: of N runs, A kept (nearly) all valid pixels, B found no object (whole map kept)``.
-    Yields ``[kept all, no object, runs]``."""
-    counts = [0, 0, 0]
-    token = _summary.set(counts)
-    try:
-        yield counts
-    finally:
-        _summary.reset(token)
-    if counts[0] or counts[1]:
-        log.warning("scene %s: of %d runs, %d kept all or nearly all of the valid pixels (reduction < 1 %%), %d found "
-                    "no convincing object area (whole map kept, flagged no_object)", name, counts[2], counts[0],
-                    counts[1])
 
 
 def train_stride(scene: Scene, cfg: PipelineConfig) -> int:
