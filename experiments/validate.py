@@ -74,6 +74,8 @@ class ValidateConfig(RunConfig):
             ``pole``, ``border``, ``specks``;
             experiments.scenes.add_junk) and scored with the defaults.
         baselines: task baselines (somtorch.tasks.baselines) scored beside the defaults, one run per frame.
+        fresh_seeds: also score the defaults, and the in-sample choice where one is adopted, on the
+            next ``ensemble`` seeds (:func:`score_fresh_seeds`; off: a quicker trial).
     """
 
     datasets: Optional[list[str]] = None
@@ -92,6 +94,9 @@ class ValidateConfig(RunConfig):
     transforms: list[str] = field(default_factory=list)
     # task baselines scored beside the defaults (one run per frame; those that need no checkpoint)
     baselines: list[str] = field(default_factory=lambda: ["plane_components", "uv_disparity"])
+    # the defaults (and an adopted choice) scored again on the next `ensemble` seeds: runs nothing was
+    # chosen on (score_fresh_seeds); a choice is confirmed where it is adopted there too
+    fresh_seeds: bool = True
 
 
 def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any]:
@@ -158,28 +163,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
             todo.append(i)
     missing = {i: [(ov, sal) for ov, sal in keys if _key(ov) not in caches[i].scores] for i in todo}
     interrupt.note(f"after {progress.n} of {len(specs)} frames")
-    if cfg.workers > 1 and len(todo) > 1:
-        # frames in worker processes (one thread each); the scores come back, the segmentations do
-        # not: a combination the choice needs later is segmented again here, deterministically
-        import concurrent.futures as cf
-
-        from somtorch.interrupt import worker_pool
-
-        from .warning_log import worker_start
-
-        start = (worker_start, (str(runs_log),)) if runs_log is not None else (None, ())
-        with worker_pool(cfg.workers, *start) as pool:  # Ctrl-C / kill: the workers end at once
-            futures = {pool.submit(_score_frame, (specs[i], base, missing[i], data_dir, 1)): i for i in todo}
-            for fut in cf.as_completed(futures):
-                caches[futures[fut]].scores.update(fut.result())
-                progress.update(1)
-                interrupt.note(f"after {progress.n} of {len(specs)} frames")
-    else:
-        for i in todo:
-            for ov, sal in missing[i]:
-                caches[i].score(ov, saliency=sal)
-            progress.update(1)
-            interrupt.note(f"after {progress.n} of {len(specs)} frames")
+    _score(caches, missing, cfg.workers, data_dir, runs_log, progress)
     if cfg.scores_out:  # the per-frame scores, so that a later run can resume from them
         Path(cfg.scores_out).parent.mkdir(parents=True, exist_ok=True)
         Path(cfg.scores_out).write_text(json.dumps({c.spec.name: c.scores for c in caches}))
@@ -211,6 +195,12 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
         knobs[k] = {"default": defaults[k], "values": entries,
                     "verdict": verdict(k, entries, in_sample, cfg.neutral)}
     summary = summarize(proto.table, rows)
+    fresh = (score_fresh_seeds(specs, cfg, grid, defaults, in_sample, data_dir, runs_log) if cfg.fresh_seeds
+             else None)
+    if fresh is not None and fresh["confirmed"] is False:  # adopted on the seeds it was chosen on only
+        for kn in knobs.values():
+            if kn["verdict"].startswith("adopt"):
+                kn["verdict"] += " (not confirmed on fresh seeds)"
     from .validate_baselines import score_baselines, summarize_baselines
 
     for row, got in zip(rows, score_baselines(caches, cfg.baselines, cfg.reduction).values()):
@@ -225,8 +215,79 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
                      "ensemble": cfg.ensemble, "seed": cfg.seed},
             "candidates": {c.spec.name: {k: {m: v[m] for m in ("runs", "useful_hits", "all_objects_hits")}
                                          for k, v in c.scores.items()} for c in caches},
-            "robustness": robustness, "baselines_summary": summarize_baselines(proto.table, rows, cfg.baselines),
+            "fresh_seeds": fresh, "robustness": robustness,
+            "baselines_summary": summarize_baselines(proto.table, rows, cfg.baselines),
             "wall_s": time.perf_counter() - t0}
+
+
+def _score(caches: list[SceneCache], missing: dict[int, list[tuple[dict[str, Any], bool]]], workers: int,
+           data_dir: Path, runs_log: Path | None, progress: Any) -> None:
+    """Score ``missing[i]`` (``[(overrides, saliency)]``) on ``caches[i]``, frame by frame, in
+    ``workers`` processes where there are several frames (one thread each: the scores come back, the
+    segmentations do not — a combination needed later is segmented again, deterministically)."""
+    from somtorch import interrupt
+
+    todo = list(missing)
+    if workers > 1 and len(todo) > 1:
+        import concurrent.futures as cf
+
+        from somtorch.interrupt import worker_pool
+
+        from .warning_log import worker_start
+
+        start = (worker_start, (str(runs_log),)) if runs_log is not None else (None, ())
+        with worker_pool(workers, *start) as pool:  # Ctrl-C / kill: the workers end at once
+            futures = {pool.submit(_score_frame, (caches[i].spec, caches[i].base, missing[i], data_dir, 1,
+                                                  caches[i].ceilings)): i for i in todo}
+            for fut in cf.as_completed(futures):
+                caches[futures[fut]].scores.update(fut.result())
+                progress.update(1)
+                interrupt.note(f"after {progress.n} of {len(caches)} frames")
+    else:
+        for i in todo:
+            for ov, sal in missing[i]:
+                caches[i].score(ov, saliency=sal)
+            progress.update(1)
+            interrupt.note(f"after {progress.n} of {len(caches)} frames")
+
+
+def score_fresh_seeds(specs: list[Any], cfg: ValidateConfig, grid: dict[str, list[Any]],
+                      defaults: dict[str, Any], choice: dict[str, Any], data_dir: Path,
+                      runs_log: Path | None = None) -> dict[str, Any]:
+    """The defaults, and the in-sample ``choice`` where the protocol adopted one, scored again on the
+    next ``ensemble`` seeds (``seed + ensemble`` …): runs nothing was chosen on. Every rule of the
+    project was chosen by looking at the runs of the first seeds, so their figures are fitted to
+    those runs as well as to the frames; the fresh seeds' say what the same frames give on runs
+    nobody looked at, and a choice is **confirmed** where the protocol adopts it again there.
+    Per dataset and as macro averages: ``default_useful_hits``, ``default_all_objects_hits`` (and
+    ``in_sample_…`` with a choice); ``decision``, ``confirmed``: None without a choice."""
+    from dataclasses import replace
+
+    from .datasets import load_frame
+
+    base = replace(cfg, seed=cfg.seed + cfg.ensemble)
+    caches = [SceneCache(s, None, base, loader=partial(load_frame, s, data_dir), ceilings=False)
+              for s in specs]
+    keys = [({}, False)] + ([(choice, False)] if choice else [])
+    progress = _progress(len(specs))
+    _score(caches, {i: keys for i in range(len(caches))}, cfg.workers, data_dir, runs_log, progress)
+    progress.close()
+    proto = Protocol(caches, base, grid, defaults)
+    t = proto.table
+    out: dict[str, Any] = {"seeds": [base.seed, base.seed + cfg.ensemble - 1], "choice": dict(choice),
+                           "datasets": {d: {} for d in t.names}, "macro_real": {}, "macro_all": {},
+                           "decision": None, "confirmed": None}
+    for part, ov in [("default", {})] + ([("in_sample", choice)] if choice else []):
+        for m in ("useful_hits", "all_objects_hits"):
+            v = proto.rates(ov, m)
+            for d, x in t.per_dataset(v).items():
+                out["datasets"][d][f"{part}_{m}"] = x
+            out["macro_real"][f"{part}_{m}"] = t.macro(v, True)[0]
+            out["macro_all"][f"{part}_{m}"] = t.macro(v, False)[0]
+    if choice:
+        dec = proto.decide(choice, {})
+        out["decision"], out["confirmed"] = dec.as_dict(), bool(dec.adopt)
+    return out
 
 
 def _scorable(specs: list[Any], data_dir: Path) -> list[Any]:
@@ -334,6 +395,14 @@ def main(dcfg: DictConfig) -> int:
                  "a perfect choice among the areas %.1f %%, a perfect grouping of the segments %.1f %%",
                  100 * m.get("default_first_place_hits", float("nan")), 100 * m["default_best_area_hits"],
                  100 * m["default_best_grouping_hits"])
+    fresh = report.get("fresh_seeds")
+    if fresh:  # the same frames on runs nothing was chosen on
+        f = fresh["macro_real"]
+        log.info("on fresh seeds (%d-%d): real macro useful-hit rate of the defaults %.1f %% (%.1f %% on the "
+                 "seeds chosen on)%s", *fresh["seeds"], 100 * f["default_useful_hits"],
+                 100 * m["default_useful_hits"],
+                 "" if fresh["confirmed"] is None else
+                 f"; the in-sample choice {'is' if fresh['confirmed'] else 'is NOT'} confirmed there")
     tot = m.get("default_misses")
     if tot:  # how the other real runs missed (validate.md: per dataset)
         log.info("real runs of the defaults: %d useful of %d; the others kept < 50 %% of the main object (%d), "

@@ -22,8 +22,9 @@ def _key(overrides: dict[str, Any]) -> str:
 class SceneCache:
     """One development scene: its segmentations per upstream setting, scores per candidate."""
 
-    def __init__(self, spec: Any, scene: Any, base: Any, loader: Any = None) -> None:
+    def __init__(self, spec: Any, scene: Any, base: Any, loader: Any = None, ceilings: bool = True) -> None:
         self.spec, self._scene, self.base, self._loader = spec, scene, base, loader
+        self.ceilings = ceilings  # the defaults' scores carry the ceilings (seconds per frame)
         self._seg: dict[str, Any] = {}
         self._target: Any = None  # the scene's all-objects target, computed once
         self.scores: dict[str, dict[str, Any]] = {}
@@ -78,7 +79,8 @@ class SceneCache:
         key = _key(overrides)
         if key in self.scores and (not saliency or "saliency" in self.scores[key]):
             return self.scores[key]
-        ground, members = self.members(overrides, first_place=not overrides)  # the defaults: the ceilings
+        ceilings = self.ceilings and not overrides  # the defaults: the ceilings
+        ground, members = self.members(overrides, first_place=ceilings)
         if self._target is None:
             self._target = all_objects(self.scene)
         target = self._target
@@ -97,7 +99,7 @@ class SceneCache:
             "ground_object_frac": ground_object_share(ground, self.scene),
             "n_objects": len(target.masks), "valid_share": float(self.scene.valid.float().mean()),
         }
-        if not overrides:  # the defaults: how far a perfect choice among the step's areas would go
+        if ceilings:  # the defaults: how far a perfect choice among the step's areas would go
             from somtorch.evaluation import grouping_ceiling, selection_ceiling, selection_gap
 
             r = self.base.reduction
@@ -122,14 +124,15 @@ class SceneCache:
 
 
 def _score_frame(job: tuple) -> dict[str, dict[str, Any]]:
-    """A worker's job: every candidate of ``keys`` (``[(overrides, saliency)]``) on one frame."""
-    spec, base, keys, data_dir, threads = job
+    """A worker's job: every candidate of ``keys`` (``[(overrides, saliency)]``) on one frame
+    (``ceilings``: :attr:`SceneCache.ceilings`)."""
+    spec, base, keys, data_dir, threads, ceilings = job
     import torch
 
     torch.set_num_threads(threads)
     from .datasets import load_frame
 
-    cache = SceneCache(spec, load_frame(spec, data_dir), base)
+    cache = SceneCache(spec, load_frame(spec, data_dir), base, ceilings=ceilings)
     for ov, sal in keys:
         cache.score(ov, saliency=sal)
     return cache.scores

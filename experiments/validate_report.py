@@ -98,6 +98,7 @@ def to_markdown(report: dict[str, Any]) -> str:
         out.append(f"| **macro, {label}** | | | | | | | {_pct(m['default_useful_hits'])} | {_pct(m['in_sample_useful_hits'])} | "
                    f"**{_pct(m['left_out_useful_hits'])}** | {_pct(m['default_all_objects_hits'])} | "
                    f"{_pct(m['in_sample_all_objects_hits'])} | **{_pct(m['left_out_all_objects_hits'])}** | | | |")
+    out += _fresh_markdown(report)
     if "default_best_area_hits" in sm["macro_real"]:
         nan = float("nan")
         out += ["", "Selection ceiling (defaults): % of runs with a useful hit; % that a perfect ranking "
@@ -198,6 +199,40 @@ def to_markdown(report: dict[str, Any]) -> str:
     from .validate_baselines import baselines_markdown
 
     return "\n".join(out) + "\n" + baselines_markdown(report)
+
+
+def _fresh_markdown(report: dict[str, Any]) -> list[str]:
+    """The defaults (and the in-sample choice) on fresh seeds beside the seeds chosen on (lines of
+    ``validate.md``; none where ``fresh_seeds`` was off)."""
+    fresh, sm = report.get("fresh_seeds"), report["summary"]
+    if not fresh:
+        return []
+    s0, n = report["rule"]["seed"], report["rule"]["ensemble"]
+    choice = fresh["choice"]
+    parts = [("default", "default")] + ([("in_sample", "in-sample")] if choice else [])
+    head = "| dataset | " + " | ".join(f"{lab} useful | **fresh seeds** | {lab} all-obj | **fresh seeds**"
+                                       for _, lab in parts) + " |"
+    a, b = fresh["seeds"]
+    out = ["", f"On fresh seeds: the same frames scored again on seeds {a}–{b}, "
+           f"runs nothing was chosen on (the protocol chose on seeds {s0}–{s0 + n - 1}, and the rules were "
+           "designed looking at those runs too), % of runs:", "", head,
+           "|---|" + "---|---|---|---|" * len(parts)]
+
+    def cells(chosen: dict[str, Any], new: dict[str, Any]) -> str:
+        return " | ".join(f"{_pct(chosen[f'{p}_{m}'])} | **{_pct(new[f'{p}_{m}'])}**"
+                          for p, _ in parts for m in ("useful_hits", "all_objects_hits"))
+
+    out += [f"| {d} | {cells(sm['datasets'][d], r)} |" for d, r in fresh["datasets"].items()]
+    out += [f"| **macro, {lab}** | {cells(sm[f'macro_{lab}'], fresh[f'macro_{lab}'])} |"
+            for lab in ("real", "all")]
+    if choice:
+        dec = fresh["decision"]
+        out += ["", f"The in-sample choice ({', '.join(f'{k}={v}' for k, v in choice.items())}) against the "
+                f"defaults on the fresh seeds: useful, real macro {_ci(dec['useful'])}, all datasets "
+                f"{_ci(dec['useful_all'])}; worst {dec['worst'][0]} {100 * dec['worst'][1]:+.1f}: "
+                + ("**confirmed** (adopted again)." if fresh["confirmed"] else
+                   f"**not confirmed**: not adopted there ({'; '.join(dec['reasons']) or 'no gain'}).")]
+    return out
 
 
 def _useful_share(scores: list[dict[str, Any]]) -> str:

@@ -1,0 +1,122 @@
+"""The protocol's fresh seeds: the defaults, and an adopted choice, scored again on runs nothing was
+chosen on (``experiments.validate.score_fresh_seeds``), and how the report reads them."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from experiments.datasets import frames, load_frame
+from experiments.validate import ValidateConfig, score_fresh_seeds
+from experiments.validate_cache import SceneCache
+from experiments.validate_report import _fresh_markdown
+
+ROOT = Path(__file__).resolve().parents[2]
+FRAMES = ["kitti_est", "oakd_toy", "eth3d_terrace_sgbm"]
+
+
+def _cfg(**kw):
+    cfg = ValidateConfig(ensemble=2, workers=1, n_boot=200, frames=FRAMES, **kw)
+    return replace(cfg, train=replace(cfg.train, epochs=3))
+
+
+def test_fresh_seeds_score_the_next_seeds_and_decide_the_choice_there(shared_data):
+    cfg = _cfg(seed=3)
+    specs = frames(names=FRAMES)
+    choice = {"objects.merge": 0.0}
+    got = score_fresh_seeds(specs, cfg, {"objects.merge": [0.0]}, {"objects.merge": 0.75}, choice,
+                            Path(shared_data))
+    assert got["seeds"] == [5, 6] and got["choice"] == choice
+    # the rates are those of the seeds after the chosen-on ones, computed directly
+    fresh_base = replace(cfg, seed=5)
+    for spec in specs:
+        cache = SceneCache(spec, load_frame(spec, shared_data), fresh_base, ceilings=False)
+        for part, ov in (("default", {}), ("in_sample", choice)):
+            s = cache.score(ov)
+            assert s["runs"] == 2 and [m.seed for m in cache.members(ov)[1]] == [5, 6]
+            assert got["datasets"][spec.dataset][f"{part}_useful_hits"] == pytest.approx(s["useful_hits"] / 2)
+        assert "first_place_hits" not in cache.score({})  # no ceilings on the fresh seeds
+    # one frame per dataset: the macro is the mean over the three real datasets
+    per = [got["datasets"][d]["default_useful_hits"] for d in ("kitti2015", "oakd", "eth3d")]
+    assert got["macro_real"]["default_useful_hits"] == pytest.approx(sum(per) / 3)
+    dec = got["decision"]
+    assert got["confirmed"] is bool(dec["adopt"]) and len(dec["useful"]) == 3
+    want = sum(got["datasets"][d]["in_sample_useful_hits"] - got["datasets"][d]["default_useful_hits"]
+               for d in ("kitti2015", "oakd", "eth3d")) / 3
+    assert dec["useful"][0] == pytest.approx(want)  # the paired difference of the fresh runs
+    # the report: both seed sets side by side, and the verdict on the choice
+    report = {"rule": {"seed": 3, "ensemble": 2}, "fresh_seeds": got,
+              "summary": {"datasets": {d: dict(v) for d, v in got["datasets"].items()},
+                          "macro_real": dict(got["macro_real"]), "macro_all": dict(got["macro_all"])}}
+    md = "\n".join(_fresh_markdown(report))
+    assert "seeds 5–6" in md and "chose on seeds 3–4" in md
+    assert ("| dataset | default useful | **fresh seeds** | default all-obj | **fresh seeds** | "
+            "in-sample useful |") in md
+    assert ("**confirmed**" if got["confirmed"] else "**not confirmed**") in md
+    got["choice"], got["decision"], got["confirmed"] = {}, None, None
+    assert "in-sample" not in "\n".join(_fresh_markdown(report))  # no choice: the defaults only
+
+
+def test_an_adopted_choice_is_decided_again_on_fresh_seeds_and_its_verdict_says_how(shared_data, tmp_path):
+    """A base whose margins swallow every reduction (tolerance 0.1 of the diagonal) against the
+    default margin: the protocol adopts the default on the seeds chosen on; the fresh seeds decide it
+    again, by the same rule, and the knob's verdict and validate.md read that decision."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "experiments.validate", f"hydra.run.dir={tmp_path}", "ensemble=2",
+         "train.epochs=3", "datasets=[middlebury_2005_2006]", f"paths.data_dir={shared_data}", "n_boot=500",
+         "~grid", "~neutral", "reduction.tolerance_image=0.1", "+grid={reduction.tolerance_image: [0.015]}",
+         "baselines=[]"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    rep = json.loads((tmp_path / "validate.json").read_text())
+    assert rep["in_sample_choice"] == {"reduction.tolerance_image": 0.015}
+    fresh = rep["fresh_seeds"]
+    assert fresh["seeds"] == [2, 3] and fresh["choice"] == rep["in_sample_choice"]
+    dec = fresh["decision"]
+    assert fresh["confirmed"] is dec["adopt"] and (dec["adopt"] or dec["reasons"])
+    d = fresh["datasets"]["middlebury_2005_2006"]
+    assert dec["useful"][0] == pytest.approx(d["in_sample_useful_hits"] - d["default_useful_hits"])
+    verdict = rep["knobs"]["reduction.tolerance_image"]["verdict"]
+    assert verdict == "adopt reduction.tolerance_image=0.015" + ("" if fresh["confirmed"] else
+                                                                 " (not confirmed on fresh seeds)")
+    md = (tmp_path / "validate.md").read_text()
+    said = "**confirmed** (adopted again)" if fresh["confirmed"] else "**not confirmed**: not adopted there ("
+    assert said in md
+    line = f"in-sample choice {'is' if fresh['confirmed'] else 'is NOT'} confirmed there"
+    assert line in proc.stdout + proc.stderr
+
+
+def test_validate_command_reads_the_fresh_seeds_and_skips_them_when_asked(shared_data, tmp_path):
+    args = [sys.executable, "-m", "experiments.validate", "ensemble=2", "train.epochs=3", "n_boot=200",
+            f"frames=[{','.join(FRAMES)}]", f"paths.data_dir={shared_data}", "~grid", "~neutral",
+            "baselines=[]"]
+    runs = {}
+    for name, extra in (("on", []), ("off", ["fresh_seeds=false"]),
+                        ("seed2", ["seed=2", "fresh_seeds=false"])):
+        proc = subprocess.run(args + [f"hydra.run.dir={tmp_path / name}"] + extra, cwd=ROOT,
+                              capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        runs[name] = (json.loads((tmp_path / name / "validate.json").read_text()), proc.stdout + proc.stderr)
+    rep, log_text = runs["on"]
+    fresh = rep["fresh_seeds"]
+    assert fresh["seeds"] == [2, 3] and fresh["confirmed"] is None  # no choice adopted on no grid
+    # the fresh seeds' figures are what a run on those seeds reads as its defaults
+    other = runs["seed2"][0]["summary"]
+    for d, r in fresh["datasets"].items():
+        assert r["default_useful_hits"] == pytest.approx(other["datasets"][d]["default_useful_hits"])
+    macro = other["macro_real"]["default_useful_hits"]
+    assert fresh["macro_real"]["default_useful_hits"] == pytest.approx(macro)
+    want = (f"on fresh seeds (2-3): real macro useful-hit rate of the defaults "
+            f"{100 * fresh['macro_real']['default_useful_hits']:.1f} % "
+            f"({100 * rep['summary']['macro_real']['default_useful_hits']:.1f} % on the seeds chosen on)")
+    assert want in log_text + "".join(p.read_text() for p in (tmp_path / "on").glob("*.log"))
+    assert "On fresh seeds" in (tmp_path / "on" / "validate.md").read_text()
+    off = runs["off"][0]
+    assert off["fresh_seeds"] is None
+    assert "On fresh seeds" not in (tmp_path / "off" / "validate.md").read_text()
+    assert off["summary"] == rep["summary"]  # the fresh pass changes nothing of the main tables
