@@ -145,6 +145,8 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
             scene = load_frame(spec, data_dir)  # (read again: _scorable keeps no map in memory)
             yield scene, base, upstream
             yield scene, base, len(keys)
+            if cfg.fresh_seeds:  # the defaults once more on the next seeds (score_fresh_seeds)
+                yield scene, base, 1
 
     what = f"{len(specs)} frames x {len(keys)} candidates"
     est = check_resources(jobs(), cfg.resources, f"validation over {what}")
