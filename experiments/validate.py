@@ -259,7 +259,7 @@ def score_fresh_seeds(specs: list[Any], cfg: ValidateConfig, grid: dict[str, lis
     """The defaults, and the in-sample ``choice`` where the protocol adopted one, scored again on the
     next ``ensemble`` seeds (``seed + ensemble`` …): runs nothing was chosen on. Every rule of the
     project was chosen by looking at the runs of the first seeds, so their figures are fitted to
-    those runs as well as to the frames; the fresh seeds' say what the same frames give on runs
+    those runs as well as to the frames; the fresh seeds say what the same frames give on runs
     nobody looked at, and a choice is **confirmed** where the protocol adopts it again there.
     Per dataset and as macro averages: ``default_useful_hits``, ``default_all_objects_hits`` (and
     ``in_sample_…`` with a choice); ``decision``, ``confirmed``: None without a choice."""
