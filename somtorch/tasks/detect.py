@@ -30,7 +30,7 @@ from ..config.objects import CONTINUOUS_SHARE
 from .candidates import OUTCOMES, Candidate, unranked_areas, verdict
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
-                      pair_continuity, rank_score, select_areas, surround_pairs)
+                      pair_continuity, rank_score, salient_order, select_areas, surround_pairs)
 from .reduction import reduce_map, valid_integral
 from .refine import (_opened_share, box_purity, map_solidity, merge_adjacent, refine_box, solidity_square,
                      with_grown_contrast)
@@ -263,9 +263,7 @@ def first_place(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tenso
     standing = [replace(a) for a in standing_areas(areas, labels, stats, ctx)]
     if cfg.rule == "paper":
         return useful(kept_areas(standing, stats, labels, cfg, ctx))
-    on_support = ctx.islands is not None
-    order = sorted((a for a in standing if a.contrast >= 0),
-                   key=lambda a: -rank_score(a, cfg, on_support=on_support))
+    order = salient_order(standing, cfg, on_support=ctx.islands is not None)  # (before the grown contrast)
     return any(useful(kept_areas(standing, stats, labels, cfg, ctx, try_first=a.neurons)) for a in order)
 
 
@@ -363,16 +361,16 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     on_support = ctx.islands is not None  # a support-verified plane was cut: size × nearness
     if not on_support and cfg.rule != "paper":  # ranked by contrast: of the area and of what merge keeps
         areas = with_grown_contrast([a for a in areas if a.contrast >= 0], stats, cfg)
-    ranked = select_areas(areas, stats, cfg, on_support=on_support)
     if try_first is not None and cfg.rule != "paper":
-        pool = sorted((a for a in areas if a.contrast >= 0),
-                      key=lambda a: -rank_score(a, cfg, on_support=on_support))
+        pool = salient_order(areas, cfg, on_support=on_support)
         lead = [a for a in pool if a.neurons == try_first]
         if not lead:
             raise ValueError(f"kept_areas(try_first={try_first}): no candidate area has these neurons")
         ranked = (lead + [a for a in pool if a is not lead[0]])[:cfg.max_areas]
         for i, a in enumerate(ranked):
             a.rank = i
+    else:
+        ranked = select_areas(areas, stats, cfg, on_support=on_support)
     taken = torch.zeros(int(stats.count.shape[0]), dtype=torch.bool)
     kept, first, n_areas = [], None, 0
     square = solidity_square(labels.shape, cfg.solidity_size, 1)

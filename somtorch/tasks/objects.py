@@ -372,12 +372,18 @@ def select_areas(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaConfig | 
     if cfg.rule == "paper":
         ranked = sorted(areas, key=lambda a: -a.mean_disparity)[:1]
     else:
-        ok = [a for a in areas if a.contrast >= 0]  # in front of its surroundings, or not salient
-        ranked = sorted(ok, key=lambda a: -rank_score(a, cfg, on_support=on_support))
-        ranked = ranked[:cfg.max_areas]
+        ranked = salient_order(areas, cfg, on_support=on_support)[:cfg.max_areas]
     for i, a in enumerate(ranked):
         a.rank = i
     return ranked
+
+
+def salient_order(areas: list[ObjectArea], cfg: AreaConfig, *, on_support: bool = False) -> list[ObjectArea]:
+    """The ``salient`` rule's candidates, best first: the areas in front of their surroundings
+    (contrast ≥ 0; one behind them is not salient) by :func:`rank_score`, all of them (``rank``
+    untouched)."""
+    return sorted((a for a in areas if a.contrast >= 0),
+                  key=lambda a: -rank_score(a, cfg, on_support=on_support))
 
 
 def rank_score(area: ObjectArea, cfg: AreaConfig, *, on_support: bool = False) -> float:
