@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 # the config groups whose change needs a new segmentation (the rest re-runs only the object step)
-UPSTREAM = ("features", "ground", "som", "train", "baseline", "method", "ensemble", "seed")
+UPSTREAM = ("features", "ground", "som", "train", "baseline", "method", "ensemble", "seed", "consensus")
 
 
 def _key(overrides: dict[str, Any]) -> str:
@@ -26,6 +26,7 @@ class SceneCache:
         self.spec, self._scene, self.base, self._loader = spec, scene, base, loader
         self.ceilings = ceilings  # the defaults' scores carry the ceilings (seconds per frame)
         self._seg: dict[str, Any] = {}
+        self.labels: Any = None  # the label maps of the members last scored (the consensus' kept maps)
         self._target: Any = None  # the scene's all-objects target, computed once
         self.scores: dict[str, dict[str, Any]] = {}
 
@@ -46,30 +47,30 @@ class SceneCache:
         each member's :attr:`~somtorch.pipeline.MemberResult.first_place` is set too."""
         from dataclasses import replace
 
-        import torch
-
         from somtorch.config import with_overrides
+        from somtorch.consensus import compact
         from somtorch.disparity.filters import median_filter
-        from somtorch.pipeline import detect, on_support, prepare, read_map
-        from somtorch.segmenters import run_segmenter
+        from somtorch.pipeline import detect_runs, on_support, prepare, read_map, segment_runs
 
         cfg = with_overrides(self.base, overrides)
         up = _key({k: v for k, v in overrides.items() if k.split(".")[0] in UPSTREAM})
         if up not in self._seg:
             scene, window, sigma = read_map(self.scene, cfg)
             valid, ground, usable, feats, train = prepare(scene, cfg, sigma=sigma)
-            seg = run_segmenter(feats, train, on_support(scene, ground, cfg.features)[0], usable, cfg)
+            segs = segment_runs(feats, train, on_support(scene, ground, cfg.features)[0], usable, cfg)
             # kept as int16 (a SOM has far fewer neurons): 30 members x 22 scenes x every upstream
             # setting of the grid as int64 label maps outgrew 24 GiB
-            small = seg.labels.to(torch.int16) if int(seg.labels.max()) < 2 ** 15 else seg.labels
+            small = [replace(compact(g), som=None) for g in segs]
             # (the object step reads no map; of the median only its window is kept, not a filtered copy)
-            self._seg[up] = (ground, replace(seg, labels=small, som=None), window)
-        ground, seg, window = self._seg[up]
+            self._seg[up] = (ground, small, window)
+        ground, segs, window = self._seg[up]
         scene = self.scene
         if window:  # the map the segmentation read (features.median): only a noisy frame's
             scene = replace(scene, disparity=median_filter(scene.disparity, scene.valid, window))
-        return ground, detect(scene, replace(seg, labels=seg.labels.long()), ground, cfg,
-                              first_place_ceiling=first_place)
+        seg, members = detect_runs(scene, (replace(g, labels=g.labels.long()) for g in segs), ground, cfg,
+                                   first_place_ceiling=first_place)
+        self.labels = seg.labels  # the kept maps' labels (PipelineConfig.consensus), for the ceilings
+        return ground, members
 
     def score(self, overrides: dict[str, Any], saliency: bool = False) -> dict[str, Any]:
         """Counts over the members with ``overrides`` (cached per key); ``saliency`` adds the mean
@@ -111,7 +112,7 @@ class SceneCache:
             self.scores[key]["first_place_hits"] = sum(bool(m.first_place) for m in members)
             self.scores[key]["selection_gap"] = selection_gap(*args, **tol)  # why those runs still missed
             # ... and how far a perfect grouping of the same segments would go
-            labels = self._seg[_key({})][1].labels
+            labels = self.labels  # the defaults' kept maps (members() just ran them)
             self.scores[key]["best_grouping_hits"] = grouping_ceiling(labels, *args[1:], members=members,
                                                                       **tol)
         if saliency:

@@ -32,12 +32,22 @@ def _finite(v: float) -> float | None:
     return None if v is None or not math.isfinite(v) else float(v)
 
 
+def _map_seed(result: PipelineResult, e: int, seed: int) -> int:
+    seg = result.segmentation
+    return int(seg.seeds[e]) if seg is not None and len(seg.seeds) > e else int(seed)
+
+
 def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | None = None) -> dict[str, Any]:
     """Everything a run measured, as JSON-ready data (the content of ``metrics.json``)."""
     members = []
     for e, m in enumerate(result.members):
         members.append({
             "seed": m.seed,
+            # PipelineConfig.consensus: the kept map of the run's maps (its index and seed: the
+            # checkpoint's), and how well it agrees with the others (mean IoU of the kept pixels; null
+            # with one map per run)
+            "consensus_map": m.consensus_map, "map_seed": _map_seed(result, e, m.seed),
+            "agreement": _finite(m.agreement),
             "quantization_error": _finite(float(result.quantization_error[e])),
             "topographic_error": _finite(float(result.topographic_error[e])),
             "n_areas": len(m.areas),

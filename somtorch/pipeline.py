@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -21,6 +21,7 @@ from typing import Any
 import torch
 
 from . import interrupt
+from .consensus import choose, compact, merge_runs, shifted
 from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, PipelineConfig, ReductionConfig,
                      SOMConfig, TrainConfig)
 from .core import SOM
@@ -40,8 +41,8 @@ from .tasks.refine import solidity_square
 from .tasks.scoring import Score, optimal_reduction, score_reduction
 
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
-           "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig", "detect", "map_stride",
-           "run_pipeline", "train_stride"]
+           "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig", "detect",
+           "detect_runs", "map_stride", "run_pipeline", "segment_runs", "train_stride"]
 DETERMINISTIC_METHODS = tuple(n for n, s in SEGMENTERS.items() if s.deterministic)
 log = logging.getLogger("somtorch.pipeline")
 
@@ -64,6 +65,10 @@ class MemberResult:
     # whether a perfect ranking of its candidates would have made it useful (detect(...,
     # first_place_ceiling=True): tasks.detect.first_place); None where not asked for or nothing to score
     first_place: bool | None = None
+    # PipelineConfig.consensus: which of the run's maps was kept, and its mean IoU of kept pixels with
+    # the others' (somtorch.consensus; None with one map per run)
+    consensus_map: int = 0
+    agreement: float | None = None
 
 
 @dataclass
@@ -269,11 +274,13 @@ def on_support(scene: Scene, ground: GroundPlane | None,
 
 
 def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: PipelineConfig,
-           timer: _Timer | None = None, *, first_place_ceiling: bool = False) -> list[MemberResult]:
+           timer: _Timer | None = None, *, first_place_ceiling: bool = False,
+           warn: bool = True) -> list[MemberResult]:
     """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d), on the scene
     and plane of :func:`on_support` (``ground`` as fitted). ``first_place_ceiling``: on a scene with a
     labelled object, also set each member's :attr:`MemberResult.first_place` (an analysis: each
-    candidate tried first until one makes the run useful; seconds per scene)."""
+    candidate tried first until one makes the run useful; seconds per scene). ``warn``: log the
+    members' fallbacks (:func:`~somtorch.fallbacks.warn_fallbacks`)."""
     timer = timer or _Timer()
     scene, ground = on_support(scene, ground, cfg.features)
     st = map_stride(scene, cfg)
@@ -312,8 +319,41 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
             first = score.useful_hit or first_place(grid_areas, found.stats, labels[e], ocfg, ctx, useful)
         members.append(MemberResult(seg.seeds[e], found.areas, found.kept, red, score, found.stats,
                                     found.no_object, found.candidates, found.unranked, first))
-    warn_fallbacks(scene.name, members)
+    if warn:
+        warn_fallbacks(scene.name, members)
     return members
+
+
+def segment_runs(feats: Features, train: Features, scene: Scene, usable: torch.Tensor, cfg: PipelineConfig,
+                 **kwargs: Any) -> Iterator[Segmentation]:
+    """Step 1b for every map of the runs (:attr:`PipelineConfig.maps`), one set of ``E`` maps at a
+    time (lazily: :func:`detect_runs` reads each before the next is trained); ``kwargs``, such as
+    ``progress`` or ``log_training``, reach the first map's training only."""
+    timer = kwargs.pop("timer", None)
+    extra = {"timer": timer} if timer is not None else {}
+    for k in range(cfg.maps):
+        first = kwargs if k == 0 else {}
+        yield run_segmenter(feats, train, scene, usable, shifted(cfg, k), **extra, **first)
+
+
+def detect_runs(scene: Scene, segs: Iterable[Segmentation], ground: GroundPlane | None, cfg: PipelineConfig,
+                timer: _Timer | None = None, *, first_place_ceiling: bool = False
+                ) -> tuple[Segmentation, list[MemberResult]]:
+    """:func:`detect` on each map of :func:`segment_runs`; with several maps per run, each run keeps
+    the map of the consensus (:func:`somtorch.consensus.choose`). Returns the kept maps as one
+    segmentation and their member results. A map's labels are held as int16 once its object step
+    is done (a map has far fewer segments), the kept ones restored to int64."""
+    held, per_map = [], []
+    for s in segs:
+        per_map.append(detect(scene, s, ground, cfg, timer, first_place_ceiling=first_place_ceiling,
+                              warn=cfg.maps == 1))
+        held.append(s if cfg.maps == 1 else compact(s))
+        del s  # not alive while the next set of maps is trained and labelled
+    if len(held) == 1:
+        return held[0], per_map[0]
+    chosen, members = choose(per_map)
+    warn_fallbacks(scene.name, members)
+    return merge_runs(held, chosen), members
 
 
 def train_stride(scene: Scene, cfg: PipelineConfig) -> int:
@@ -381,7 +421,7 @@ def resource_estimate(scene: Scene, cfg: PipelineConfig) -> Estimate:
         cfg.train.mode != "online" or cfg.train.neighborhood == "gaussian")
     return estimate(height=h, width=w, valid=scene.n_valid, train=int(scene.valid[::s, ::s].sum()), native=native,
                     dim=3 + 3 * (cfg.features.color_weight > 0), units=cfg.som.rows * cfg.som.cols,
-                    members=cfg.runs, epochs=cfg.train.epochs, mode=cfg.train.mode,
+                    members=cfg.runs, maps=cfg.maps, epochs=cfg.train.epochs, mode=cfg.train.mode,
                     batch_size=cfg.train.batch_size, method=cfg.method, iterations=cfg.baseline.kmeans_iterations,
                     map_stride=cfg.features.stride_at(cfg.objects.map_stride, h, w))
 
@@ -407,9 +447,9 @@ def run_pipeline(scene: Scene, cfg: PipelineConfig | None = None, *, progress: b
             scene, window, sigma = read_map(scene, cfg)
         valid, ground, usable, feats, train = prepare(scene, cfg, timer, sigma=sigma)
         work = on_support(scene, ground, cfg.features)[0]  # (a superpixel segmenter reads its disparity)
-        seg = run_segmenter(feats, train, work, usable, cfg, progress=progress, log_training=log_training,
+        segs = segment_runs(feats, train, work, usable, cfg, progress=progress, log_training=log_training,
                             timer=timer)
-        members = detect(scene, seg, ground, cfg, timer)
+        seg, members = detect_runs(scene, segs, ground, cfg, timer)
     runs = seg.labels.shape[0]
     qe = te = torch.full((runs,), float("nan"))
     if metrics and seg.som is not None:

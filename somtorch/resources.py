@@ -15,7 +15,10 @@ big tensors each stage holds at its peak:
   per-map work buffers (``~64 B`` per read pixel);
 * the errors of the trained maps (their time counted with the labelling): the top-2 BMUs of the
   training pixels ``(E, N_train, 2)`` int64
-  and their masks (the label maps still held).
+  and their masks (the label maps still held);
+* several maps per run (``maps``, ``PipelineConfig.consensus``): the sets of ``E`` maps run one
+  after another, and each set done is held until the consensus — its label maps as int16 and one
+  boolean reduced map per member — so every stage also holds the sets before it.
 
 The peak is the largest stage plus what every stage holds (features, scene, chunk buffers). It
 is the memory *added* to the process that calls it (the imported libraries are already resident),
@@ -109,7 +112,8 @@ class Estimate:
 
 def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, units: int = 64, members: int = 1,
              epochs: int = 10, mode: str = "batch", batch_size: int = 256, map_stride: int = 1,
-             method: str = "som", iterations: int = 20, metrics: bool = True, native: bool = True) -> Estimate:
+             method: str = "som", iterations: int = 20, metrics: bool = True, native: bool = True,
+             maps: int = 1) -> Estimate:
     """Predicted peak memory and time of one pipeline call (see the module docstring).
 
     Args:
@@ -122,6 +126,9 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
         metrics: the quantization and topographic errors are computed (``run_pipeline(metrics=True)``).
         native: the compiled kernels serve the training (``somtorch.core.native``: the online
             loop, the batch map's fused search and sums); False: the torch path, 50-100x slower.
+        maps: maps per run (``PipelineConfig.consensus``): trained and read by the object step one
+            set of E after another; each set done is held (int16 labels, its reduced maps) until
+            the consensus is taken.
 
     >>> e = estimate(height=500, width=741, valid=343_274, train=1_979, members=400, map_stride=2)
     >>> 1.6 < e.peak_bytes / 2**30 < 2.5  # measured: 1.6 GiB
@@ -155,15 +162,19 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
             train_s = e * epochs * nt * _T_MINISOM
         train_b += min(e * nt * k, _CHUNK) * 4 * 3  # one chunk of distances (and its argmin)
     per = min(e, max(1, (1 << 27) // max(1, n * k)))  # somtorch.tasks.segmentation.members_per_call
-    label_b = e * hw * 8 + per * n * 8 + min(per * n * k, _CHUNK) * 4 * 3
-    label_s = e * n * k * _T_LABEL + (e * nt * _T_ERRORS if metrics and method in ("som", "minisom") else 0.0)
+    # the sets of maps done, held for the consensus: int16 labels and a boolean reduced map per member
+    # (5 bytes a pixel with the allocator's slack, measured: tests/test_resources.py)
+    held = (maps - 1) * e * hw * 5
+    label_b = held + e * hw * 8 + per * n * 8 + min(per * n * k, _CHUNK) * 4 * 3
+    label_s = maps * e * n * k * _T_LABEL + (e * nt * _T_ERRORS if metrics and method in ("som", "minisom") else 0.0)
     read = math.ceil(height / map_stride) * math.ceil(width / map_stride)
-    objects_b = e * hw * 8 + (e * read * 8 * 2 if map_stride > 1 else 0) + read * 64 + hw * 24
-    objects_s = e * (read * _T_OBJECT + _T_MEMBER)
+    objects_b = held + e * hw * 8 + (e * read * 8 * 2 if map_stride > 1 else 0) + read * 64 + hw * 24
+    objects_s = maps * e * (read * _T_OBJECT + _T_MEMBER)
     # quantization / topographic error of the trained maps: top-2 BMUs (E, N_train, 2) int64 and masks
-    metrics_b = e * hw * 8 + (e * nt * 36 if metrics and method in ("som", "minisom") else 0)
-    peak = feats + _FIXED + max(train_b, label_b, objects_b, metrics_b)
-    return Estimate(int(train_b), int(label_b), int(objects_b), int(peak), float(train_s), float(label_s),
+    metrics_b = ((held + e * hw * 5 if maps > 1 else 0) + e * hw * 8
+                 + (e * nt * 36 if metrics and method in ("som", "minisom") else 0))
+    peak = feats + _FIXED + max(train_b + held, label_b, objects_b, metrics_b)
+    return Estimate(int(train_b), int(label_b), int(objects_b), int(peak), float(maps * train_s), float(label_s),
                     float(objects_s))
 
 

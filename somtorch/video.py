@@ -31,8 +31,9 @@ from .config import PipelineConfig, WarmStartConfig
 from .core import SOM
 from .core.threads import contended
 from .disparity.scene import Scene
-from .pipeline import MemberResult, _Timer, detect, map_stride, on_support, prepare, read_map
-from .segmenters import Segmentation, _from_prototypes, run_segmenter
+from .pipeline import (MemberResult, _Timer, detect, detect_runs, map_stride, on_support, prepare, read_map,
+                       segment_runs)
+from .segmenters import Segmentation, _from_prototypes
 from .tasks.ground import GroundPlane, fit_ground_plane, rim_share, view_rim
 from .tasks.segmentation import segment
 
@@ -144,10 +145,11 @@ class SequenceRunner:
                 # BMUs) and the training ones; the object step never reads the others
                 on = feats if grid > 1 else feats.subsample(st)
                 seg.labels = segment(w, on.x, on.pixels, on.shape)
-        else:  # cold: exactly run_pipeline's segmenter
-            seg = run_segmenter(feats, train, work, usable, cfg, timer=timer)
+            members = detect(scene, seg, ground, cfg, timer)
+        else:  # cold: exactly run_pipeline's segmenter and object step (the consensus' map, if several)
+            seg, members = detect_runs(scene, segment_runs(feats, train, work, usable, cfg, timer=timer), ground,
+                                       cfg, timer)
             self.som = seg.som
-        members = detect(scene, seg, ground, cfg, timer)
         t = dict(timer.t)
         t["ground"] = t.get("ground", 0.0)
         t["objects"] = t.get("objects", 0.0) + t.pop("reduction", 0.0)

@@ -536,7 +536,8 @@ def test_many_calls_warn_once_about_kept_everything(caplog):
     paper = {f"{g}.{k}": v for g, name in (("objects", "paper"), ("reduction", "paper"), ("ground", "none"),
                                            ("features", "paper_or"), ("train", "online"), ("som", "grid4x7"))
              for k, v in (yaml.safe_load((conf / g / f"{name}.yaml").read_text()) or {}).items()}
-    cfg = with_overrides(PipelineConfig(), {**paper, "train.epochs": 2})  # the paper preset, shorter
+    # the paper preset (one map per run), shorter
+    cfg = with_overrides(PipelineConfig(), {**paper, "train.epochs": 2, "consensus": 1})
     with caplog.at_level(logging.WARNING, logger="somtorch.pipeline"):
         plain = [run_pipeline(scene, with_overrides(cfg, {"seed": s}), metrics=False) for s in range(4)]
         per_call = len(caplog.records)

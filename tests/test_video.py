@@ -40,10 +40,11 @@ def test_warm_frames_keep_the_object_and_reuse_the_ground():
     assert set(res[1].timings) == {"ground", "features", "train", "segment", "objects"}
 
 
-@pytest.mark.parametrize("noise", [0.0, 0.6])
-def test_a_cold_frame_is_what_run_pipeline_gives(noise):
-    """Also on a dense sensor's noisy frame, which both read through the median (features.median)."""
-    cfg = with_overrides(PipelineConfig(), {"ensemble": 2})
+@pytest.mark.parametrize("noise, consensus", [(0.0, 1), (0.6, 1), (0.0, 3)])
+def test_a_cold_frame_is_what_run_pipeline_gives(noise, consensus):
+    """Also on a dense sensor's noisy frame, which both read through the median (features.median),
+    and with several maps per run (the consensus' map is kept, and warm-started next)."""
+    cfg = with_overrides(PipelineConfig(), {"ensemble": 2, "consensus": consensus})
     frame = next(pan_sequence(_world(), 120, 90, 1))
     if noise:
         g = torch.Generator().manual_seed(1)
@@ -55,6 +56,10 @@ def test_a_cold_frame_is_what_run_pipeline_gives(noise):
     for got, want in zip(cold.members, ref.members):
         assert [a.box for a in got.kept] == [a.box for a in want.kept]
         assert got.reduction.reduction_union == want.reduction.reduction_union
+        assert (got.seed, got.consensus_map, got.agreement) == (want.seed, want.consensus_map, want.agreement)
+    runner = SequenceRunner(cfg)
+    runner.step(frame)
+    assert torch.equal(runner.som.weight, ref.som.weight) and runner.som.seeds == [m.seed for m in ref.members]
 
 
 def test_runner_checks_its_settings():

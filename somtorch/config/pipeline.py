@@ -130,12 +130,15 @@ class PipelineConfig(Validated):
         method: the segmenter of step 1b ("som"; baselines: see somtorch.segmenters.SEGMENTERS).
         ensemble: SOMs trained at once, one per seed (seed, seed + 1, ...).
         seed: seed of the first member.
+        consensus: maps trained per run, each with a seed of its own; the run keeps the one whose
+            reduced map agrees best with the others' (:mod:`somtorch.consensus`). 1 = one map per
+            run, the paper's. A deterministic method trains one map whatever this says.
         object_id: the scored object id of the scene's mask (None = the scene's main object(s)).
         device: torch device the SOM trains and labels pixels on ("cpu", "cuda", "cuda:1", "mps").
     """
 
     _constraints: ClassVar[dict[str, Any]] = {
-        "method": Choice(options.METHODS), "ensemble": POSITIVE_INT,
+        "method": Choice(options.METHODS), "ensemble": POSITIVE_INT, "consensus": POSITIVE_INT,
         "seed": Interval(0, None, integer=True), "object_id": Interval(1, None, integer=True, optional=True),
     }
 
@@ -149,6 +152,7 @@ class PipelineConfig(Validated):
     reduction: ReductionConfig = field(default_factory=ReductionConfig)
     ensemble: int = 1
     seed: int = 0
+    consensus: int = 5
     object_id: int | None = None
     device: str = "cpu"
 
@@ -156,6 +160,11 @@ class PipelineConfig(Validated):
     def runs(self) -> int:
         """Members actually computed: ``ensemble``, or 1 for a deterministic method."""
         return 1 if options.METHODS[self.method] else self.ensemble
+
+    @property
+    def maps(self) -> int:
+        """Maps trained per run: ``consensus``, or 1 for a deterministic method."""
+        return 1 if options.METHODS[self.method] else self.consensus
 
 
 def with_overrides(cfg: PipelineConfig, overrides: dict[str, Any]) -> PipelineConfig:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from somtorch import SOM
+from somtorch.consensus import SEED_STRIDE
 from somtorch.disparity.io import write_pfm
 from somtorch.disparity import load_scene
 from somtorch.geometry import read_ply
@@ -104,7 +105,10 @@ def test_checkpoint_loads_as_the_trained_som(embedded_run):
     som = SOM.load(embedded_run / "som.safetensors")
     grid = _strict_json(embedded_run / "metrics.json")["config"]["som"]
     assert (som.rows, som.cols, som.dim, som.ensemble) == (grid["rows"], grid["cols"], 3, 2)
-    assert som.seeds == [0, 1]
+    members = _strict_json(embedded_run / "metrics.json")["members"]
+    assert [m["seed"] for m in members] == [0, 1]  # the runs' seeds; the checkpoint holds the kept maps
+    assert som.seeds == [m["map_seed"] for m in members]
+    assert som.seeds == [(s + m["consensus_map"] * SEED_STRIDE) % 2 ** 32 for s, m in zip((0, 1), members)]
     assert som.weight.shape == (2, grid["rows"] * grid["cols"], 3)
     assert bool(som.weight.isfinite().all())
 

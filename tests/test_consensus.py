@@ -1,0 +1,118 @@
+"""Several maps per run (PipelineConfig.consensus): the medoid of the maps' reduced maps is kept."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+import torch
+
+from somtorch.consensus import SEED_STRIDE, agreement, medoid, shifted
+from somtorch.disparity import load_scene
+from somtorch.outputs import summarize
+from somtorch.pipeline import PipelineConfig, SOMConfig, TrainConfig, run_pipeline
+
+E, K, SEED = 4, 3, 7
+
+
+def _cfg(**kw) -> PipelineConfig:
+    kw = {"ensemble": E, "seed": SEED, "consensus": 1, **kw}
+    return PipelineConfig(som=SOMConfig(rows=4, cols=7), train=TrainConfig(epochs=3), **kw)
+
+
+@pytest.fixture(scope="module")
+def scene(shared_data):
+    """A real frame with a labelled object whose maps disagree from seed to seed (ETH3D terrace)."""
+    return load_scene(shared_data / "eth3d" / "terrace")
+
+
+@pytest.fixture(scope="module")
+def runs(scene):
+    """The consensus run, and each of its maps run alone (one map per run, the map's own seeds)."""
+    cfg = _cfg(consensus=K)
+    return run_pipeline(scene, cfg), [run_pipeline(scene, shifted(_cfg(), k)) for k in range(K)]
+
+
+def _box_masks(boxes: list[tuple[int, int, int, int]], h: int = 6, w: int = 8) -> torch.Tensor:
+    m = torch.zeros(len(boxes), h, w, dtype=torch.bool)
+    for i, (x0, y0, x1, y1) in enumerate(boxes):
+        m[i, y0:y1 + 1, x0:x1 + 1] = True
+    return m
+
+
+def test_the_medoid_follows_the_majority_and_ties_go_to_the_first():
+    masks = _box_masks([(0, 0, 3, 3), (4, 2, 7, 5), (4, 2, 7, 4)])  # two maps agree, one kept elsewhere
+    iou = agreement(masks)
+    assert torch.equal(iou, iou.T) and torch.allclose(iou.diagonal(), torch.ones(3, dtype=iou.dtype))
+    assert iou[0, 1] == 0 and iou[1, 2] == pytest.approx(12 / 16)
+    k, agree = medoid(masks)
+    assert k == 1 and agree == pytest.approx((0 + 12 / 16) / 2)  # 1 and 2 tie on 0.75: the first
+    assert medoid(_box_masks([(0, 0, 3, 3), (4, 2, 7, 5)])) == (0, 0.0)  # two that disagree: the first
+    assert medoid(masks[:1]) == (0, 1.0)
+    assert medoid(torch.zeros(3, 4, 4, dtype=torch.bool)) == (0, 1.0)  # nothing kept, alike
+
+
+def test_map_seeds_are_distinct_32_bit_seeds_and_map_0_is_the_run_s_own():
+    cfg = _cfg()
+    assert shifted(cfg, 0) is cfg
+    seeds = {(shifted(replace(cfg, seed=s), k).seed) for s in range(0, 2000) for k in range(8)}
+    assert len(seeds) == 2000 * 8 and max(seeds) < 2 ** 32
+    assert shifted(cfg, 1).seed == SEED + SEED_STRIDE
+
+
+def test_each_run_keeps_the_medoid_of_its_maps(scene, runs):
+    result, alone = runs
+    assert len(result.members) == E and result.labels.shape == (E, scene.height, scene.width)
+    picked = set()
+    for e, m in enumerate(result.members):
+        masks = torch.stack([a.members[e].reduction.mask for a in alone])
+        k, agree = medoid(masks)
+        picked.add(k)
+        want = alone[k].members[e]
+        assert (m.consensus_map, m.seed) == (k, SEED + e) and m.agreement == pytest.approx(agree)
+        assert result.som.seeds[e] == shifted(_cfg(), k).seed + e  # the kept map's own seed
+        assert torch.equal(m.reduction.mask, want.reduction.mask)
+        assert [a.box for a in m.kept] == [a.box for a in want.kept]
+        assert m.score.useful_hit == want.score.useful_hit
+        assert torch.equal(result.labels[e], alone[k].labels[e])
+        assert torch.equal(result.som.weight[e], alone[k].som.weight[e])
+        assert result.quantization_error[e] == pytest.approx(float(alone[k].quantization_error[e]))
+    assert picked != {0}, "no run kept another map than its first: the test no longer shows a choice"
+
+
+def test_the_kept_map_alone_reproduces_its_run(scene, runs):
+    result, _ = runs
+    e, m = next((e, m) for e, m in enumerate(result.members) if m.consensus_map > 0)
+    solo = run_pipeline(scene, _cfg(ensemble=1, seed=result.som.seeds[e], consensus=1)).members[0]
+    assert torch.equal(solo.reduction.mask, m.reduction.mask)
+    # ... and run e of the ensemble is the run seeded seed + e alone, consensus and all
+    alone = run_pipeline(scene, _cfg(ensemble=1, seed=SEED + e, consensus=K)).members[0]
+    assert torch.equal(alone.reduction.mask, m.reduction.mask) and alone.consensus_map == m.consensus_map
+
+
+def test_one_map_per_run_is_the_plain_pipeline(scene, runs):
+    _, alone = runs
+    plain = alone[0]
+    assert [m.seed for m in plain.members] == [SEED + e for e in range(E)]
+    assert all(m.consensus_map == 0 and m.agreement is None for m in plain.members)
+
+
+def test_metrics_json_says_which_map_each_run_kept(scene, runs):
+    result, alone = runs
+    members = summarize(scene, result)["members"]
+    assert [m["consensus_map"] for m in members] == [m.consensus_map for m in result.members]
+    assert all(0.0 <= m["agreement"] <= 1.0 for m in members)
+    assert all(m["agreement"] is None for m in summarize(scene, alone[0])["members"])
+
+
+def test_a_deterministic_method_trains_one_map():
+    scene = load_scene("motorcycle")
+    cfg = PipelineConfig(method="slic", som=SOMConfig(rows=3, cols=4), ensemble=2, consensus=1)
+    one, three = run_pipeline(scene, cfg), run_pipeline(scene, replace(cfg, consensus=3))
+    assert torch.equal(one.labels, three.labels)
+    assert [(m.consensus_map, m.agreement) for m in three.members] == [(0, None)]
+
+
+def test_a_bad_consensus_is_refused():
+    with pytest.raises(ValueError, match="consensus"):
+        run_pipeline(load_scene("motorcycle"), _cfg(consensus=0))
