@@ -264,6 +264,8 @@ def draw_summary(scene, result, member: int = 0):
         s = m.score
         verdict = (f" — object {identified_percent(s.identified_fraction)} identified, x_opt {s.x_opt:.1f} %: "
                    f"{'useful' if s.useful_hit else 'not useful'}")
-    fig.suptitle(f"{scene.name}, member {member} (seed {m.seed}), {len(m.kept)} kept area(s), reduction "
+    # several maps per run (PipelineConfig.consensus): which one the run kept, and how well the others agree
+    kept_map = "" if m.agreement is None else f", map {m.consensus_map} kept (agreement {m.agreement:.2f})"
+    fig.suptitle(f"{scene.name}, member {member} (seed {m.seed}{kept_map}), {len(m.kept)} kept area(s), reduction "
                  f"{m.reduction.reduction_union:.1f} %{verdict}", fontsize=13)
     return fig

@@ -116,3 +116,19 @@ def test_a_deterministic_method_trains_one_map():
 def test_a_bad_consensus_is_refused():
     with pytest.raises(ValueError, match="consensus"):
         run_pipeline(load_scene("motorcycle"), _cfg(consensus=0))
+
+
+def test_the_summary_picture_names_the_kept_map(scene, runs):
+    import matplotlib.pyplot as plt
+
+    from somtorch.viz import draw_summary
+
+    result, alone = runs
+    e = next(e for e, m in enumerate(result.members) if m.consensus_map > 0)
+    m = result.members[e]
+    fig = draw_summary(scene, result, e)
+    assert f"map {m.consensus_map} kept (agreement {m.agreement:.2f})" in fig._suptitle.get_text()
+    plt.close(fig)
+    fig = draw_summary(scene, alone[0], 0)
+    assert "kept (agreement" not in fig._suptitle.get_text()
+    plt.close(fig)
