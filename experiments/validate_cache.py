@@ -44,7 +44,7 @@ class SceneCache:
     def members(self, overrides: dict[str, Any], first_place: bool = False) -> tuple[Any, list]:
         """``(ground plane, member results)`` of the base config with ``overrides``; the segmentation
         is computed once per upstream setting (features, ground, SOM, training). ``first_place``:
-        each member's :attr:`~somtorch.pipeline.MemberResult.first_place` is set too."""
+        each member's :attr:`~somtorch.results.MemberResult.first_place` is set too."""
         from dataclasses import replace
 
         from somtorch.config import with_overrides

@@ -89,7 +89,7 @@ def merge_runs(segs: list[Any], chosen: list[int]) -> Any:
 
 def choose(per_map: list[list[Any]]) -> tuple[list[int], list[Any]]:
     """For every run, the map of ``per_map`` (``K`` lists of ``E``
-    :class:`~somtorch.pipeline.MemberResult`) whose reduced map is the medoid (:func:`medoid`);
+    :class:`~somtorch.results.MemberResult`) whose reduced map is the medoid (:func:`medoid`);
     returns the chosen map per run and its member results, each carrying the run's seed (that of its
     map 0), ``consensus_map`` (the chosen map's index) and ``agreement`` (its mean IoU with the other
     maps' kept pixels)."""

@@ -82,7 +82,7 @@ def ground_object_share(ground: GroundPlane | None, scene: Scene) -> float:
 def selection_ceiling(members: list, object_mask: torch.Tensor, valid: torch.Tensor, x_opt: float, *,
                       tolerance_px: float, tolerance_frac: float, tolerance_image: float,
                       useful_factor: float = USEFUL_FACTOR) -> int:
-    """How many of ``members`` (pipeline :class:`~somtorch.pipeline.MemberResult`) had, among their
+    """How many of ``members`` (pipeline :class:`~somtorch.results.MemberResult`) had, among their
     kept areas and every area the grouping produced, one whose box alone — with the reduction's
     tolerance — is a useful hit: the ceiling of a perfect choice among the step's candidates
     (a run counted here may still miss: the step kept another area, or more than one).

@@ -17,7 +17,7 @@ _summary: ContextVar[list[int] | None] = ContextVar("fallback_summary", default=
 
 
 def warn_fallbacks(name: str, members: Sequence[Any]) -> None:
-    """One warning line for the members (:class:`~somtorch.pipeline.MemberResult`) that kept (nearly)
+    """One warning line for the members (:class:`~somtorch.results.MemberResult`) that kept (nearly)
     everything, one for those that found no object; inside :func:`fallback_summary` only counted, for
     its one line at the end."""
     everything = [i for i, m in enumerate(members) if not m.no_object and m.reduction.reduction_union < 1.0]

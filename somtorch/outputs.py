@@ -1,4 +1,4 @@
-"""Turn a :class:`~somtorch.pipeline.PipelineResult` into files and a metrics dictionary.
+"""Turn a :class:`~somtorch.results.PipelineResult` into files and a metrics dictionary.
 
 Every file is written atomically (temporary file + rename), so an interrupted run never leaves a
 half-written file behind. Open3D (PLY) and TensorBoard are imported only when those outputs are
@@ -216,7 +216,7 @@ class SequenceWriter:
         self.frames = 0
 
     def add(self, index: int, scene: Scene, member: Any) -> None:
-        """Frame ``index``: ``scene`` and its :class:`~somtorch.pipeline.MemberResult` ``member``."""
+        """Frame ``index``: ``scene`` and its :class:`~somtorch.results.MemberResult` ``member``."""
         import cv2
 
         img = viz.kept_view(scene.disparity, scene.valid, member.reduction.mask, member.reduction.boxes)

@@ -15,7 +15,7 @@ import logging
 import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import torch
@@ -24,98 +24,26 @@ from . import interrupt
 from .consensus import choose, compact, merge_runs, shifted
 from .config import (AreaConfig, BaselineConfig, FeatureConfig, GroundConfig, PipelineConfig, ReductionConfig,
                      SOMConfig, TrainConfig)
-from .core import SOM
 from .core.threads import contended
 from .disparity.features import Features, make_features, relative_disparity
 from .disparity.filters import median_filter, median_noise
 from .disparity.scene import Scene
 from .fallbacks import fallback_summary, warn_fallbacks  # noqa: F401  (fallback_summary: its old home)
 from .resources import Estimate, estimate
+from .results import MemberResult, PipelineResult
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
-from .tasks.candidates import Candidate
 from .tasks.detect import MapContext, find_objects, first_place
 from .tasks.ground import GroundPlane, fit_ground_plane, noise_sigma
-from .tasks.objects import NeuronStats, ObjectArea
+from .tasks.objects import ObjectArea
 from .tasks.reduction import Reduction, reduce_map, valid_integral
 from .tasks.refine import solidity_square
-from .tasks.scoring import Score, optimal_reduction, score_reduction
+from .tasks.scoring import optimal_reduction, score_reduction
 
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
            "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig", "detect",
            "detect_runs", "map_stride", "run_pipeline", "segment_runs", "train_stride"]
 DETERMINISTIC_METHODS = tuple(n for n, s in SEGMENTERS.items() if s.deterministic)
 log = logging.getLogger("somtorch.pipeline")
-
-
-@dataclass
-class MemberResult:
-    """Results of one ensemble member."""
-
-    seed: int
-    areas: list[ObjectArea]
-    kept: list[ObjectArea]
-    reduction: Reduction
-    score: Score | None
-    stats: NeuronStats
-    no_object: bool = False  # nothing convincing was found: the whole map is kept
-    # what became of each area the selection looked at, and how many it left out by reason
-    # (tasks.candidates.Candidate, ObjectResult.unranked): metrics.json's "candidates"
-    candidates: list[Candidate] = field(default_factory=list)
-    unranked: dict[str, int] = field(default_factory=dict)
-    # whether a perfect ranking of its candidates would have made it useful (detect(...,
-    # first_place_ceiling=True): tasks.detect.first_place); None where not asked for or nothing to score
-    first_place: bool | None = None
-    # PipelineConfig.consensus: which of the run's maps was kept, and its mean IoU of kept pixels with
-    # the others' (somtorch.consensus; None with one map per run)
-    consensus_map: int = 0
-    agreement: float | None = None
-
-
-@dataclass
-class PipelineResult:
-    """What :func:`run_pipeline` returns: the segmentation and, per ensemble member, its kept areas,
-    reduction and score.
-
-    Attributes:
-        features: the features of every valid pixel (those that are segmented).
-        train_features: the features the segmenter was trained on (every ``train_stride``-th pixel).
-        som: the trained maps (method ``som`` / ``minisom``); None for the other methods.
-        labels: segment per pixel ``(E, H, W)``; -1 = not segmented (invalid or ground plane).
-        ref_disparity: reference disparity of each segment in px ``(E, K)``.
-        members: one :class:`MemberResult` per ensemble member.
-        timings: seconds per stage.
-        quantization_error: per member ``(E,)``.
-        topographic_error: per member ``(E,)``.
-        ground: the verified ground plane, or None.
-        method: the segmenter's name.
-        prototypes: feature-space centres ``(E, K, D)`` (SOM weights, k-means centres), or None.
-        segmentation: the segmenter's own result, or None.
-        config: the config that made it.
-        median: the window of the median the map was read through (``features.median`` or wider
-            where the map is noisy, :func:`denoised`), 0 = read as given.
-    """
-
-    features: Features
-    train_features: Features
-    som: SOM | None  # the trained maps (method "som" / "minisom"); None for the other methods
-    labels: torch.Tensor  # (E, H, W) segment per pixel; -1 = not segmented (invalid or ground plane)
-    ref_disparity: torch.Tensor  # (E, K) px
-    members: list[MemberResult]
-    timings: dict[str, float]
-    quantization_error: torch.Tensor
-    topographic_error: torch.Tensor
-    ground: GroundPlane | None = None
-    method: str = "som"
-    prototypes: torch.Tensor | None = None  # (E, K, D) feature-space centres (SOM weights, k-means)
-
-    segmentation: Segmentation | None = None
-    config: PipelineConfig | None = None  # the config that made it
-    median: int = 0  # the median window the map was read through (0 = as given)
-
-    @property
-    def num_segments(self) -> int:
-        """Segments per member ``K`` (neurons, clusters or superpixels)."""
-        return int(self.ref_disparity.shape[-1])
 
 
 class _Timer:
