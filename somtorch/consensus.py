@@ -5,14 +5,14 @@ with the others' — the medoid under the intersection over union of the pixels 
 A SOM's result on one frame depends on its seed: on the development corpus a frame the defaults
 get right in most runs still loses some of them to a map that chained the object to its
 neighbours, or split it. Those losing maps rarely agree with each other, while the maps that find
-the object keep nearly the same pixels; the medoid of three maps therefore follows the majority
-where there is one, and costs ``K`` trainings and object steps per run (each a few milliseconds
-on a 640 × 480 map: docs/validation.md, session 34).
+the object keep nearly the same pixels; the medoid of several maps therefore follows the majority
+where there is one, and costs ``K`` trainings and object steps per run (each some milliseconds to a
+few tens of them on a 640 × 480 map: docs/validation.md, session 34).
 
 Map ``k`` of the run seeded ``s`` is seeded ``(s + k · SEED_STRIDE) mod 2³²`` (torch's CPU generator
 reads 32 bits of a seed; map 0 is the run's own seed: ``consensus=1`` is the plain pipeline, bit for
-bit). ``SEED_STRIDE`` is the 32-bit golden-ratio constant, so the first maps of runs seeded
-0 … 2²⁰ never share a seed, and the chosen map alone, trained with its own seed, reproduces the
+bit). ``SEED_STRIDE`` is the 32-bit golden-ratio constant, so the first eight maps of runs seeded
+below 2²⁰ never share a seed, and the chosen map alone, trained with its own seed, reproduces the
 run's result.
 """
 
