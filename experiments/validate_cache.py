@@ -67,8 +67,7 @@ class SceneCache:
         scene = self.scene
         if window:  # the map the segmentation read (features.median): only a noisy frame's
             scene = replace(scene, disparity=median_filter(scene.disparity, scene.valid, window))
-        seg, members = detect_runs(scene, (replace(g, labels=g.labels.long()) for g in segs), ground, cfg,
-                                   first_place_ceiling=first_place)
+        seg, members = detect_runs(scene, segs, ground, cfg, first_place_ceiling=first_place)  # (int16 held)
         self.labels = seg.labels  # the kept maps' labels (PipelineConfig.consensus), for the ceilings
         return ground, members
 

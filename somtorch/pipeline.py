@@ -269,16 +269,19 @@ def detect_runs(scene: Scene, segs: Iterable[Segmentation], ground: GroundPlane 
                 ) -> tuple[Segmentation, list[MemberResult]]:
     """:func:`detect` on each map of :func:`segment_runs`; with several maps per run, each run keeps
     the map of the consensus (:func:`somtorch.consensus.choose`). Returns the kept maps as one
-    segmentation and their member results. A map's labels are held as int16 once its object step
-    is done (a map has far fewer segments), the kept ones restored to int64."""
+    segmentation and their member results. ``segs`` may hold their labels as int16 (a cache of
+    them, :func:`~somtorch.consensus.compact`): the object step reads them widened to int64, and a
+    map waiting for the consensus is held as int16 (a map has far fewer segments); the kept labels
+    come back as int64."""
     held, per_map = [], []
     for s in segs:
-        per_map.append(detect(scene, s, ground, cfg, timer, first_place_ceiling=first_place_ceiling,
+        wide = s if s.labels.dtype == torch.long else replace(s, labels=s.labels.long())
+        per_map.append(detect(scene, wide, ground, cfg, timer, first_place_ceiling=first_place_ceiling,
                               warn=cfg.maps == 1))
-        held.append(s if cfg.maps == 1 else compact(s))
-        del s  # not alive while the next set of maps is trained and labelled
-    if len(held) == 1:
-        return held[0], per_map[0]
+        if cfg.maps == 1:
+            return wide, per_map[0]
+        held.append(compact(s))  # (a held int16 map is kept as it is, not copied)
+        del s, wide  # not alive while the next set of maps is trained and labelled
     chosen, members = choose(per_map)
     warn_fallbacks(scene.name, members)
     return merge_runs(held, chosen), members

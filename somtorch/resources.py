@@ -166,12 +166,13 @@ def estimate(*, height: int, width: int, valid: int, train: int, dim: int = 3, u
     # (5 bytes a pixel with the allocator's slack, measured: tests/test_resources.py)
     held = (maps - 1) * e * hw * 5
     label_b = held + e * hw * 8 + per * n * 8 + min(per * n * k, _CHUNK) * 4 * 3
-    label_s = maps * e * n * k * _T_LABEL + (e * nt * _T_ERRORS if metrics and method in ("som", "minisom") else 0.0)
+    label_s = maps * e * n * k * _T_LABEL + (e * nt * _T_ERRORS if metrics and method in ("som", "minisom")
+                                             else 0.0)
     read = math.ceil(height / map_stride) * math.ceil(width / map_stride)
     objects_b = held + e * hw * 8 + (e * read * 8 * 2 if map_stride > 1 else 0) + read * 64 + hw * 24
     objects_s = maps * e * (read * _T_OBJECT + _T_MEMBER)
     # quantization / topographic error of the trained maps: top-2 BMUs (E, N_train, 2) int64 and masks
-    metrics_b = ((held + e * hw * 5 if maps > 1 else 0) + e * hw * 8
+    metrics_b = ((maps * e * hw * 5 if maps > 1 else 0) + e * hw * 8  # every set held, the kept copied
                  + (e * nt * 36 if metrics and method in ("som", "minisom") else 0))
     peak = feats + _FIXED + max(train_b + held, label_b, objects_b, metrics_b)
     return Estimate(int(train_b), int(label_b), int(objects_b), int(peak), float(maps * train_s), float(label_s),
