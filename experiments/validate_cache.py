@@ -109,6 +109,10 @@ class SceneCache:
             self.scores[key]["best_area_hits"] = selection_ceiling(*args, **tol)
             # ... and a perfect ranking: each candidate tried first (somtorch.tasks.detect.first_place)
             self.scores[key]["first_place_hits"] = sum(bool(m.first_place) for m in members)
+            # ... and a perfect choice among each run's maps (PipelineConfig.consensus): a useful one
+            # wherever the run has one (with one map a run: the run itself)
+            self.scores[key]["best_map_hits"] = sum(
+                x.useful_hit if m.maps_useful is None else m.maps_useful > 0 for m, x in zip(members, s))
             self.scores[key]["selection_gap"] = selection_gap(*args, **tol)  # why those runs still missed
             # ... and how far a perfect grouping of the same segments would go
             labels = self.labels  # the defaults' kept maps (members() just ran them)

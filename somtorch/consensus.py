@@ -91,11 +91,14 @@ def choose(per_map: list[list[Any]]) -> tuple[list[int], list[Any]]:
     """For every run, the map of ``per_map`` (``K`` lists of ``E``
     :class:`~somtorch.results.MemberResult`) whose reduced map is the medoid (:func:`medoid`);
     returns the chosen map per run and its member results, each carrying the run's seed (that of its
-    map 0), ``consensus_map`` (the chosen map's index) and ``agreement`` (its mean IoU with the other
-    maps' kept pixels)."""
+    map 0), ``consensus_map`` (the chosen map's index), ``agreement`` (its mean IoU with the other
+    maps' kept pixels) and, on a scored scene, ``maps_useful`` (how many of the run's maps were useful)."""
     chosen, members = [], []
     for e in range(len(per_map[0])):
         k, agree = medoid(torch.stack([m[e].reduction.mask for m in per_map]))
         chosen.append(k)
-        members.append(replace(per_map[k][e], seed=per_map[0][e].seed, consensus_map=k, agreement=agree))
+        scores = [m[e].score for m in per_map]
+        useful = sum(s.useful_hit for s in scores) if all(s is not None for s in scores) else None
+        members.append(replace(per_map[k][e], seed=per_map[0][e].seed, consensus_map=k, agreement=agree,
+                               maps_useful=useful))
     return chosen, members

@@ -48,6 +48,8 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
             # with one map per run)
             "consensus_map": m.consensus_map, "map_seed": _map_seed(result, e, m.seed),
             "agreement": _finite(m.agreement),
+            # how many of the run's maps were useful alone (null: one map a run, or nothing to score)
+            "maps_useful": m.maps_useful,
             "quantization_error": _finite(float(result.quantization_error[e])),
             "topographic_error": _finite(float(result.topographic_error[e])),
             "n_areas": len(m.areas),

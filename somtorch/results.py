@@ -42,6 +42,10 @@ class MemberResult:
     # the others' (somtorch.consensus; None with one map per run)
     consensus_map: int = 0
     agreement: float | None = None
+    # ... and how many of the run's maps were useful on their own (a scene with a labelled object; None
+    # with one map per run or nothing to score): a perfect choice among the maps keeps a useful one
+    # wherever this is above 0, the medoid follows the majority
+    maps_useful: int | None = None
 
 
 @dataclass

@@ -76,6 +76,7 @@ def test_each_run_keeps_the_medoid_of_its_maps(scene, runs):
         picked.add(k)
         want = alone[k].members[e]
         assert (m.consensus_map, m.seed) == (k, SEED + e) and m.agreement == pytest.approx(agree)
+        assert m.maps_useful == sum(a.members[e].score.useful_hit for a in alone)  # the maps' own hits
         assert result.som.seeds[e] == shifted(_cfg(), k).seed + e  # the kept map's own seed
         assert torch.equal(m.reduction.mask, want.reduction.mask)
         assert [a.box for a in m.kept] == [a.box for a in want.kept]
@@ -100,7 +101,7 @@ def test_one_map_per_run_is_the_plain_pipeline(scene, runs):
     _, alone = runs
     plain = alone[0]
     assert [m.seed for m in plain.members] == [SEED + e for e in range(E)]
-    assert all(m.consensus_map == 0 and m.agreement is None for m in plain.members)
+    assert all(m.consensus_map == 0 and m.agreement is None and m.maps_useful is None for m in plain.members)
 
 
 def test_metrics_json_says_which_map_each_run_kept(scene, runs):
@@ -108,6 +109,7 @@ def test_metrics_json_says_which_map_each_run_kept(scene, runs):
     members = summarize(scene, result)["members"]
     assert [m["consensus_map"] for m in members] == [m.consensus_map for m in result.members]
     assert all(0.0 <= m["agreement"] <= 1.0 for m in members)
+    assert [m["maps_useful"] for m in members] == [m.maps_useful for m in result.members]
     assert all(m["agreement"] is None for m in summarize(scene, alone[0])["members"])
 
 
