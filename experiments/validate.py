@@ -395,8 +395,8 @@ def main(dcfg: DictConfig) -> int:
     if "default_best_grouping_hits" in m:
         log.info("real macro ceilings of the defaults: a perfect choice among each run's maps %.1f %%, a "
                  "perfect ranking of the candidates %.1f %%, a perfect choice among the areas %.1f %%, a "
-                 "perfect grouping of the segments %.1f %%", 100 * m.get("default_best_map_hits", float("nan")),
-                 100 * m.get("default_first_place_hits", float("nan")), 100 * m["default_best_area_hits"],
+                 "perfect grouping of the segments %.1f %%", 100 * m.get("default_best_map_hits", math.nan),
+                 100 * m.get("default_first_place_hits", math.nan), 100 * m["default_best_area_hits"],
                  100 * m["default_best_grouping_hits"])
     fresh = report.get("fresh_seeds")
     if fresh:  # the same frames on runs nothing was chosen on

@@ -296,7 +296,8 @@ def test_validate_command_writes_the_left_out_tables(shared_data, tmp_path):
             f"choice among the areas {100 * mr['default_best_area_hits']:.1f} %, a perfect "
             f"grouping of the segments {100 * mr['default_best_grouping_hits']:.1f} %")
     assert mr["default_useful_hits"] <= mr["default_first_place_hits"] <= 1
-    assert "| dataset | default useful | best map of the run | best candidate first | best single area |" in md
+    assert "| dataset | default useful | best map of the run | best candidate first | best single area |" \
+        in md
     assert f"a perfect choice among each run's maps {100 * mr['default_best_map_hits']:.1f} %" in log_text
     assert want in log_text, log_text[-1500:]
     assert all(0 <= r["default"]["best_grouping_hits"] <= r["default"]["runs"] for r in rep["rows"])
