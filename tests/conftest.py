@@ -25,6 +25,19 @@ _SLOW_PARTS = ("experiments", "quality", "fuzz")
 _SLOW_FILES = ("test_notebooks.py", "test_benchmarks.py", "test_distributed.py", "test_hostile_files.py")
 
 
+@pytest.fixture
+def kernel(monkeypatch):
+    """The native kernels (``somtorch.core.native``) enabled, even when the suite runs with
+    ``SOMTORCH_NATIVE=0``; a skip with the reason where they cannot be built here (the callers'
+    torch paths are tested anyway)."""
+    from somtorch.core import native
+
+    monkeypatch.delenv(native.ENV_SWITCH, raising=False)
+    if native.library() is None:
+        pytest.skip(f"the native kernel could not be built or loaded ({native._failed}); "
+                    "its callers use their torch paths")
+
+
 def pytest_collection_modifyitems(config, items):
     slow = pytest.mark.slow
     for item in items:

@@ -27,6 +27,7 @@ import torch
 
 from ..config import AreaConfig, ReductionConfig
 from ..config.objects import CONTINUOUS_SHARE
+from ..core.native import native_label_stats
 from .candidates import OUTCOMES, Candidate, unranked_areas, verdict
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,
@@ -167,15 +168,21 @@ def linkable_segments(labels: torch.Tensor, stats: NeuronStats, ctx: MapContext,
         ``labels`` ``(H, W)`` long (−1 not segmented).
     """
     k = int(stats.count.shape[0])
-    lab = torch.where(labels >= 0, labels, k).view(-1)
-    ok = torch.ones(k, dtype=torch.bool)
-    if ctx.ground_residual is not None:
-        res = torch.bincount(lab, weights=ctx.ground_residual.reshape(-1).double(), minlength=k + 1)[:k]
-        ok &= res > ctx.clutter_band * stats.count  # left-over ground pixels chain everything they touch
-    isl = ctx.islands.view(-1)
     n_isl = ctx.n_islands
-    # (segment, island) of every pixel; the unsegmented ones in row K, left out
-    table = torch.bincount(lab * n_isl + isl, minlength=(k + 1) * n_isl).view(k + 1, n_isl)[:k]
+    weights = [] if ctx.ground_residual is None else [ctx.ground_residual]
+    one = native_label_stats(labels, k, weights, groups=ctx.islands, n_groups=n_isl)
+    if one is not None:  # one pass: the residual's sums and the (segment, island) table
+        res, table = (one.sums[0] if weights else None), one.groups
+    else:
+        lab = torch.where(labels >= 0, labels, k).view(-1)
+        res = None if not weights else \
+            torch.bincount(lab, weights=ctx.ground_residual.reshape(-1).double(), minlength=k + 1)[:k]
+        # (segment, island) of every pixel; the unsegmented ones in row K, left out
+        table = torch.bincount(lab * n_isl + ctx.islands.view(-1),
+                               minlength=(k + 1) * n_isl).view(k + 1, n_isl)[:k]
+    ok = torch.ones(k, dtype=torch.bool)
+    if res is not None:
+        ok &= res > ctx.clutter_band * stats.count  # left-over ground pixels chain everything they touch
     ok &= table.amax(1).double() >= cfg.box_coverage * stats.count  # a straddling segment chains two objects
     return ok
 
@@ -194,8 +201,12 @@ def standing_areas(areas: list[ObjectArea], labels: torch.Tensor, stats: NeuronS
     if ctx.ground_height is None:
         return areas
     k = int(stats.count.shape[0])
-    lab = torch.where(labels >= 0, labels, k).view(-1)
-    h_sum = torch.bincount(lab, weights=ctx.ground_height.reshape(-1).double(), minlength=k + 1)[:k]
+    one = native_label_stats(labels, k, [ctx.ground_height])
+    if one is not None:
+        h_sum = one.sums[0]
+    else:
+        lab = torch.where(labels >= 0, labels, k).view(-1)
+        h_sum = torch.bincount(lab, weights=ctx.ground_height.reshape(-1).double(), minlength=k + 1)[:k]
     cnt = stats.count.double()
     return [a for a in areas if float(h_sum[a.neurons].sum()) >= -ctx.clutter_band * float(cnt[a.neurons].sum())]
 

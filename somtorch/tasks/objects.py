@@ -44,6 +44,7 @@ import torch
 
 from ..config import AreaConfig
 from ..config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX
+from ..core.native import native_label_stats
 from ..validation import check_tensor
 
 
@@ -147,8 +148,10 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
                  continuity: torch.Tensor | None = None) -> NeuronStats:
     """Statistics of the segments of one label map.
 
-    Every statistic comes from one pass over the map: bincounts on labels, on (row, label) and
-    (column, label) keys, and on the (label, label) keys of the 4-connected pixel pairs.
+    Every statistic comes from one pass over the map: the native kernel's
+    (:func:`~somtorch.core.native.native_label_stats`) or, where it is unavailable, bincounts on
+    labels, on (row, label) and (column, label) keys, and on the (label, label) keys of the
+    4-connected pixel pairs — the same numbers, bit for bit.
 
     Args:
         spread: :func:`disparity_spread` of ``disparity`` over ``labels >= 0`` if already known
@@ -168,11 +171,47 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     k = num_neurons
     h, w = labels.shape
     valid = labels >= 0
+    if continuity is not None and tuple(continuity.shape) != (max(h * (w - 1), 0) + max((h - 1) * w, 0),):
+        raise ValueError(f"continuity {tuple(continuity.shape)} is not pair_continuity() of an {h}×{w} map")
+
+    def symmetric(counts: torch.Tensor) -> torch.Tensor:  # (K, K) pair counts → boundary lengths
+        m = counts.double()
+        m.fill_diagonal_(0.0)
+        return m + m.T
+
+    cont = None
+    one = native_label_stats(labels, k, [disparity], pairs=True, continuity=continuity)
+    if one is not None:  # the fused pass: the same numbers (tests/tasks/test_neuron_stats_native.py)
+        count, dsum, box = one.count.double(), one.sums[0], one.box
+        boundary = symmetric(one.pairs)
+        if continuity is not None:
+            cont = symmetric(one.continuous)
+    else:
+        count, dsum, box, boundary, cont = _segment_counts(labels, disparity, k, continuity)
+    mean_d = dsum / count
+    d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
+    g_count = g_sum = None
+    if surround is not None:
+        idx, d_out = surround
+        keys = labels.reshape(-1)[idx]
+        behind = d_out < mean_d[keys]  # the support is background only where it lies behind the segment
+        keys, d_out = keys[behind], d_out[behind]
+        g_count = torch.bincount(keys, minlength=k).double()
+        g_sum = torch.bincount(keys, weights=d_out, minlength=k).double()  # long when empty
+    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, g_count, g_sum, cont)
+
+
+def _segment_counts(labels: torch.Tensor, disparity: torch.Tensor, k: int, continuity: torch.Tensor | None
+                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+    """:func:`neuron_stats`' pass over the map in torch (where the native kernel is unavailable):
+    bincounts on labels, on (row, label) and (column, label) keys, and on the (label, label) keys
+    of the 4-connected pixel pairs. Returns counts, disparity sums, boxes, boundary lengths and
+    continuous boundary lengths (None without ``continuity``)."""
+    h, w = labels.shape
     # label k+1 (index K) collects the invalid pixels so that no boolean gather is needed
-    lab = torch.where(valid, labels, k)
+    lab = torch.where(labels >= 0, labels, k)
     count = torch.bincount(lab.view(-1), minlength=k + 1)[:k].double()
     dsum = torch.bincount(lab.view(-1), weights=disparity.reshape(-1).double(), minlength=k + 1)[:k]
-    mean_d = dsum / count
     # per-row / per-column presence of each label gives the boxes without listing pixel coordinates
     rows = torch.bincount((lab + (k + 1) * torch.arange(h)[:, None]).view(-1), minlength=h * (k + 1))
     cols = torch.bincount((lab + (k + 1) * torch.arange(w)[None, :]).view(-1), minlength=w * (k + 1))
@@ -192,25 +231,11 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
         m.fill_diagonal_(0.0)
         return m + m.T
 
-    cont = None
     if continuity is None:
-        boundary = symmetric(torch.bincount(flat, minlength=(k + 1) ** 2))
-    else:  # one bincount for both: key × 2 + (continuous across the pair)
-        if continuity.shape != flat.shape:
-            raise ValueError(f"continuity {tuple(continuity.shape)} is not pair_continuity() of an "
-                             f"{h}×{w} map")
-        both = torch.bincount(flat * 2 + continuity, minlength=2 * (k + 1) ** 2).view(-1, 2)
-        boundary, cont = symmetric(both.sum(1)), symmetric(both[:, 1].contiguous())
-    d_range, d_robust = spread if spread is not None else disparity_spread(disparity, valid)
-    g_count = g_sum = None
-    if surround is not None:
-        idx, d_out = surround
-        keys = labels.reshape(-1)[idx]
-        behind = d_out < mean_d[keys]  # the support is background only where it lies behind the segment
-        keys, d_out = keys[behind], d_out[behind]
-        g_count = torch.bincount(keys, minlength=k).double()
-        g_sum = torch.bincount(keys, weights=d_out, minlength=k).double()  # long when empty
-    return NeuronStats(count, mean_d, box, boundary, d_range, d_robust, g_count, g_sum, cont)
+        return count, dsum, box, symmetric(torch.bincount(flat, minlength=(k + 1) ** 2)), None
+    # one bincount for both: key × 2 + (continuous across the pair)
+    both = torch.bincount(flat * 2 + continuity, minlength=2 * (k + 1) ** 2).view(-1, 2)
+    return count, dsum, box, symmetric(both.sum(1)), symmetric(both[:, 1].contiguous())
 
 
 def pair_continuity(disparity: torch.Tensor) -> torch.Tensor:

@@ -28,14 +28,6 @@ def _kernel_enabled(monkeypatch):
     monkeypatch.delenv(native.ENV_SWITCH, raising=False)
 
 
-@pytest.fixture
-def kernel():
-    """Skip (with the reason) where the kernel cannot be built here; the fallback tests run anyway."""
-    if native.library() is None:
-        pytest.skip(f"the native BMU kernel could not be built or loaded ({native._failed}); "
-                    "bmu_search uses the torch path")
-
-
 def _sqdist(x: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
     """``Σ_d (x_d − w_d)²`` left to right in the input dtype: x ``(N, D)``/``(E, N, D)``, w ``(E, K, D)``
     → ``(E, N, K)``."""

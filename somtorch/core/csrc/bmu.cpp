@@ -11,6 +11,9 @@
 // IEEE operations in the same order as the scalar formula above, hence the result of a sample
 // does not depend on its lane, tile, thread, the number of threads, or the other members.
 //
+// Also: somtorch_label_stats, the object step's one pass over a label map (counts, sums, boxes and
+// the adjacency of 4-connected pixel pairs; see native_label_stats in native.py).
+//
 // Plain C ABI (called through ctypes); no torch headers, so it builds in about a second.
 // OpenMP comes from the libgomp that torch has already loaded (same soname), so it shares
 // torch's thread pool.
@@ -813,12 +816,71 @@ int entry_bounded(const T* x, int64_t x_stride, const T* w, int64_t E, int64_t N
   return 0;
 }
 
+// ---- label-map statistics: one pass over an (H, W) map of labels in [-1, K) ----
+// The same numbers as torch.bincount over the pixels in row-major order (sums added in that order,
+// so the float64 sums are bit-identical), without the key tensors. -1 = no label (skipped).
+int label_stats(const int64_t* lab, int64_t H, int64_t W, int64_t K, const double* wts, int64_t M,
+                const uint8_t* cont, const int64_t* groups, int64_t G, int do_pairs, int64_t* count,
+                double* sums, int64_t* box, int64_t* pairs, int64_t* cpairs, int64_t* gcount) {
+  if (H < 0 || W < 0 || K < 1 || M < 0 || (groups != nullptr && G < 1)) return 1;
+  const int64_t HW = H * W;
+  for (int64_t i = 0; i < HW; ++i)
+    if (lab[i] < -1 || lab[i] >= K) return 3;
+  if (groups != nullptr)
+    for (int64_t i = 0; i < HW; ++i)
+      if (lab[i] >= 0 && (groups[i] < 0 || groups[i] >= G)) return 3;
+  for (int64_t k = 0; k < K; ++k) {
+    box[4 * k] = W;
+    box[4 * k + 1] = H;
+    box[4 * k + 2] = -1;
+    box[4 * k + 3] = -1;
+  }
+  for (int64_t y = 0; y < H; ++y) {
+    const int64_t* row = lab + y * W;
+    for (int64_t x = 0; x < W; ++x) {
+      const int64_t l = row[x];
+      if (l < 0) continue;
+      const int64_t i = y * W + x;
+      count[l] += 1;
+      for (int64_t m = 0; m < M; ++m) sums[m * K + l] += wts[m * HW + i];
+      int64_t* b = box + 4 * l;
+      if (x < b[0]) b[0] = x;
+      if (y < b[1]) b[1] = y;
+      if (x > b[2]) b[2] = x;
+      if (y > b[3]) b[3] = y;
+      if (groups != nullptr) gcount[l * G + groups[i]] += 1;
+    }
+  }
+  if (!do_pairs) return 0;
+  // 4-connected pairs: the horizontal ones row by row, then the vertical ones (pair_continuity's order)
+  int64_t p = 0;
+  for (int64_t y = 0; y < H; ++y) {
+    const int64_t* row = lab + y * W;
+    for (int64_t x = 0; x + 1 < W; ++x, ++p) {
+      const int64_t a = row[x], b = row[x + 1];
+      if (a < 0 || b < 0 || a == b) continue;
+      pairs[a * K + b] += 1;
+      if (cont != nullptr && cont[p]) cpairs[a * K + b] += 1;
+    }
+  }
+  for (int64_t y = 0; y + 1 < H; ++y) {
+    const int64_t* row = lab + y * W;
+    for (int64_t x = 0; x < W; ++x, ++p) {
+      const int64_t a = row[x], b = row[x + W];
+      if (a < 0 || b < 0 || a == b) continue;
+      pairs[a * K + b] += 1;
+      if (cont != nullptr && cont[p]) cpairs[a * K + b] += 1;
+    }
+  }
+  return 0;
+}
+
 }  // namespace
 
 extern "C" {
 
 // Version of this C ABI; native.py refuses a library that reports another one.
-int somtorch_bmu_abi(void) { return 4; }
+int somtorch_bmu_abi(void) { return 5; }
 
 int somtorch_bmu_f32(const float* x, int64_t x_stride, const float* w, int64_t E, int64_t N,
                      int64_t K, int64_t D, int top, int64_t* out, int nthreads) {
@@ -867,6 +929,15 @@ int somtorch_bounded_f64(const double* x, int64_t x_stride, const double* w, int
                          int64_t* counts, int64_t* searched, int nthreads) {
   return entry_bounded<double>(x, x_stride, w, E, N, K, D, c, u, l, drift, dmax, rho, alpha, grow, fresh,
                                sums, counts, searched, nthreads);
+}
+
+// Statistics of one label map (label_stats above): 0 = done, 1 = bad sizes, 3 = a label or group
+// out of range (nothing to trust; the caller uses its torch path).
+int somtorch_label_stats(const int64_t* lab, int64_t H, int64_t W, int64_t K, const double* wts, int64_t M,
+                         const uint8_t* cont, const int64_t* groups, int64_t G, int do_pairs, int64_t* count,
+                         double* sums, int64_t* box, int64_t* pairs, int64_t* cpairs, int64_t* gcount) {
+  return label_stats(lab, H, W, K, wts, M, cont, groups, G, do_pairs, count, sums, box, pairs, cpairs,
+                     gcount);
 }
 
 }  // extern "C"
