@@ -15,7 +15,7 @@ import logging
 import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import torch
@@ -40,8 +40,9 @@ from .tasks.refine import solidity_square
 from .tasks.scoring import optimal_reduction, score_reduction
 
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
-           "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig", "detect",
-           "detect_runs", "map_stride", "run_pipeline", "segment_runs", "train_stride"]
+           "ObjectSetup", "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig",
+           "detect", "detect_runs", "map_stride", "object_setup", "run_pipeline", "segment_runs",
+           "train_stride"]
 DETERMINISTIC_METHODS = tuple(n for n, s in SEGMENTERS.items() if s.deterministic)
 log = logging.getLogger("somtorch.pipeline")
 
@@ -201,27 +202,63 @@ def on_support(scene: Scene, ground: GroundPlane | None,
     return replace(scene, disparity=height), level
 
 
-def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: PipelineConfig,
-           timer: _Timer | None = None, *, first_place_ceiling: bool = False,
-           warn: bool = True) -> list[MemberResult]:
-    """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d), on the scene
-    and plane of :func:`on_support` (``ground`` as fitted). ``first_place_ceiling``: on a scene with a
-    labelled object, also set each member's :attr:`MemberResult.first_place` (an analysis: each
-    candidate tried first until one makes the run useful; seconds per scene). ``warn``: log the
-    members' fallbacks (:func:`~somtorch.fallbacks.warn_fallbacks`)."""
-    timer = timer or _Timer()
+@dataclass
+class ObjectSetup:
+    """What the object step reads of a scene, the same for every map of a run (each segments the
+    same pixels): the scene and plane of :func:`on_support`, the object step's stride, the
+    :class:`~somtorch.tasks.detect.MapContext` of the strided map, the reduction's valid-pixel
+    integral at full size, the scored mask and its ``x_opt``. Built by :func:`object_setup`, once
+    per run rather than once per map (:func:`detect_runs`)."""
+
+    scene: Scene
+    ground: GroundPlane | None
+    stride: int
+    ocfg: AreaConfig
+    ctx: MapContext
+    integral: torch.Tensor
+    obj_mask: torch.Tensor | None
+    x_opt: float | None
+    segmented: torch.Tensor  # (H, W) bool: the pixels every map of the run labels
+
+    def serves(self, labels: torch.Tensor) -> bool:
+        """Whether a map's ``(E, H, W)`` labels segment the pixels this setup was built for."""
+        return tuple(labels.shape[-2:]) == tuple(self.segmented.shape) and \
+            torch.equal(labels[0] >= 0, self.segmented)
+
+
+def object_setup(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg: PipelineConfig
+                 ) -> ObjectSetup:
+    """The :class:`ObjectSetup` of ``scene`` (as read by :func:`read_map`), for maps segmenting the
+    pixels of ``labels`` ``(E, H, W)`` (``labels[0] >= 0``) with ``ground`` as fitted."""
     scene, ground = on_support(scene, ground, cfg.features)
     st = map_stride(scene, cfg)
-    h, w = scene.disparity.shape
-    with timer("objects"):  # every member segments the same pixels: one context for all
-        disp, valid, labels, g, ocfg = _strided(scene, seg.labels, ground,
-                                                replace(cfg.objects, map_stride=st))
-        ctx = MapContext.build(disp, valid, labels[0] >= 0, g, ocfg, cfg.reduction, st)
-        integral = ctx.integral if st == 1 else valid_integral(scene.valid)  # the reduction's: full size
+    disp, valid, strided, g, ocfg = _strided(scene, labels[:1], ground, replace(cfg.objects, map_stride=st))
+    ctx = MapContext.build(disp, valid, strided[0] >= 0, g, ocfg, cfg.reduction, st)
+    integral = ctx.integral if st == 1 else valid_integral(scene.valid)  # the reduction's: full size
     obj_mask, x_opt = None, None
     if scene.objects is not None:
         obj_mask = scene.scored_mask(cfg.object_id)
         x_opt = optimal_reduction(obj_mask, scene.valid, integral)  # the same for every member
+    return ObjectSetup(scene, ground, st, ocfg, ctx, integral, obj_mask, x_opt, labels[0] >= 0)
+
+
+def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: PipelineConfig,
+           timer: _Timer | None = None, *, first_place_ceiling: bool = False,
+           warn: bool = True, setup: ObjectSetup | None = None) -> list[MemberResult]:
+    """Stages objects, reduction and score of every member of ``seg`` (steps 1c, 1d), on the scene
+    and plane of :func:`on_support` (``ground`` as fitted). ``first_place_ceiling``: on a scene with a
+    labelled object, also set each member's :attr:`MemberResult.first_place` (an analysis: each
+    candidate tried first until one makes the run useful; seconds per scene). ``warn``: log the
+    members' fallbacks (:func:`~somtorch.fallbacks.warn_fallbacks`). ``setup``: the scene's
+    :func:`object_setup` if already built for these pixels (built here otherwise)."""
+    timer = timer or _Timer()
+    with timer("objects"):  # every member segments the same pixels: one context for all
+        if setup is None or not setup.serves(seg.labels):
+            setup = object_setup(scene, seg.labels, ground, cfg)
+        st, ocfg, ctx, integral = setup.stride, setup.ocfg, setup.ctx, setup.integral
+        labels = seg.labels if st == 1 else seg.labels[:, ::st, ::st].contiguous()
+    scene, obj_mask, x_opt = setup.scene, setup.obj_mask, setup.x_opt
+    h, w = scene.disparity.shape
     r = cfg.reduction
     members = []
     for e in range(seg.labels.shape[0]):
@@ -274,10 +311,14 @@ def detect_runs(scene: Scene, segs: Iterable[Segmentation], ground: GroundPlane 
     map waiting for the consensus is held as int16 (a map has far fewer segments); the kept labels
     come back as int64."""
     held, per_map = [], []
+    setup = None
     for s in segs:
         wide = s if s.labels.dtype == torch.long else replace(s, labels=s.labels.long())
+        if setup is None:  # once per run: every map segments the same pixels (detect checks)
+            with (timer or _Timer())("objects"):
+                setup = object_setup(scene, wide.labels, ground, cfg)
         per_map.append(detect(scene, wide, ground, cfg, timer, first_place_ceiling=first_place_ceiling,
-                              warn=cfg.maps == 1))
+                              warn=cfg.maps == 1, setup=setup))
         if cfg.maps == 1:
             return wide, per_map[0]
         held.append(compact(s))  # (a held int16 map is kept as it is, not copied)

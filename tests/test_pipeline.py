@@ -433,6 +433,31 @@ def test_object_step_on_a_strided_map_keeps_full_size_boxes(motorcycle):
         assert b.kept[0].pixels % 4 == 0  # sampled pixels counted at full size
 
 
+def test_an_object_setup_serves_only_the_pixels_it_was_built_for(motorcycle):
+    # the maps of a run share one object setup (the context of the segmented pixels, the full-size
+    # integral, x_opt); a map segmenting other pixels gets its own, never a stale one
+    from dataclasses import replace
+
+    from somtorch.pipeline import detect, object_setup, on_support, prepare, read_map, segment_runs
+
+    cfg = replace(_cfg(ensemble=2), consensus=1)
+    scene, _, sigma = read_map(motorcycle, cfg)
+    _, ground, usable, feats, train = prepare(scene, cfg, sigma=sigma)
+    seg = next(segment_runs(feats, train, on_support(scene, ground, cfg.features)[0], usable, cfg))
+    seg = replace(seg, labels=seg.labels.long())
+    setup = object_setup(scene, seg.labels, ground, cfg)
+    assert setup.serves(seg.labels) and setup.stride == 2
+    fewer = seg.labels.clone()
+    fewer[:, :, : fewer.shape[-1] // 3] = -1  # the left third no longer segmented
+    assert not setup.serves(fewer)
+    other = replace(seg, labels=fewer)
+    given, built = (detect(scene, other, ground, cfg, warn=False, setup=s) for s in (setup, None))
+    assert [_kept_key(m) for m in given] == [_kept_key(m) for m in built]
+    assert [_areas_key(m) for m in given] == [_areas_key(m) for m in built]
+    assert [_kept_key(m) for m in given] != [_kept_key(m) for m in detect(scene, seg, ground, cfg, warn=False,
+                                                                            setup=setup)]
+
+
 def test_a_bent_support_is_re_expressed_on_the_strided_map():
     """The object step reads every 2nd pixel: the plane's slopes scale by 2, its bend by 4, so that
     the strided map's surface is the full map's at the sampled pixels."""
