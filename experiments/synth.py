@@ -80,6 +80,18 @@ def corpus_digest(digests: dict[str, str]) -> str:
     return h.hexdigest()[:16]
 
 
+def rendered_with() -> str:
+    """The libraries whose code makes a frame's bytes, as one line (each manifest entry's
+    ``rendered_with``): where two machines' digests differ, the entries say whether their numpy,
+    OpenCV, torch or torch's CPU kernels (``torch.backends.cpu.get_cpu_capability``) did."""
+    import cv2
+    import numpy as np
+    import torch
+
+    return (f"numpy {np.__version__}, opencv {cv2.__version__}, torch {torch.__version__} "
+            f"({torch.backends.cpu.get_cpu_capability()})")
+
+
 def _make(family: str, camera: str, seed: int, scale: float, root: str) -> dict:
     """Generate and write one frame; its manifest entry (with its digest and the seconds it took)."""
     from somtorch.synth.frame import generate_frame
@@ -88,7 +100,7 @@ def _make(family: str, camera: str, seed: int, scale: float, root: str) -> dict:
     t0, c0 = time.perf_counter(), time.process_time()
     frame = generate_frame(family, seed, camera, scale=scale)
     folder = write_frame(frame, frame_dir(family, camera, seed, scale, root))
-    return {**manifest_entry(frame), "digest": frame_digest(folder),
+    return {**manifest_entry(frame), "digest": frame_digest(folder), "rendered_with": rendered_with(),
             "wall_s": round(time.perf_counter() - t0, 3),
             "cpu_s": round(time.process_time() - c0, 3)}
 
@@ -152,7 +164,8 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
                "cpu_s_per_frame": {c: round(sum(u for _, u in v) / len(v), 3) for c, v in seconds.items()}}
     log.info("%s", summary)
     log.info("corpus digest %s over %d frames (the same on another machine: the same bytes; per frame: each "
-             "manifest.json's \"digest\")", summary["digest"], len(digests))
+             "manifest.json's \"digest\", and what rendered it: \"rendered_with\"; here %s)", summary["digest"],
+             len(digests), rendered_with())
     return summary
 
 

@@ -36,6 +36,13 @@ def test_the_command_writes_frames_once_and_lists_them_in_the_manifest(tmp_path)
     assert first["generated"] == 4 and first["present"] == 0
     manifest = json.loads((tmp_path / "stairs_oakd_x0.25" / "manifest.json").read_text())
     assert sorted(manifest["frames"]) == ["00000", "00001"]
+    import cv2
+    import numpy as np
+    import torch
+
+    made_by = manifest["frames"]["00001"]["rendered_with"]  # what made the bytes, for a digest that differs
+    assert f"numpy {np.__version__}" in made_by and f"opencv {cv2.__version__}" in made_by
+    assert torch.backends.cpu.get_cpu_capability() in made_by
     assert (tmp_path / "room_oakd_x0.25" / "00001" / "disp0GT.pfm").is_file()
     again = generate(cfg, progress=False)
     assert again["generated"] == 0 and again["present"] == 4
