@@ -25,7 +25,7 @@ import torch
 
 from .core import SOM
 
-__all__ = ["SEED_STRIDE", "agreement", "choose", "compact", "medoid", "merge_runs", "shifted"]
+__all__ = ["SEED_STRIDE", "agreement", "choose", "compact", "medoid", "merge_runs", "pair_counts", "shifted"]
 
 SEED_STRIDE = 0x9E3779B9  # map k of the run seeded s: (s + k * SEED_STRIDE) mod 2**32
 
@@ -37,12 +37,47 @@ def shifted(cfg: Any, k: int) -> Any:
 
 def agreement(masks: torch.Tensor) -> torch.Tensor:
     """Pairwise intersection over union ``(K, K)`` of ``K`` boolean masks (any shape after the
-    first dimension); two empty masks agree fully."""
-    m = masks.reshape(masks.shape[0], -1).to(torch.float64)
-    inter = m @ m.T
-    area = m.sum(1)
+    first dimension); two empty masks agree fully. The pixel counts are exact integers however they
+    are taken (:func:`pair_counts` for boolean masks on the CPU, else a float64 product of 0/1
+    values, exact below 2⁵³ pixels): the same IoUs either way."""
+    if masks.dtype == torch.bool and masks.device.type == "cpu":
+        inter = pair_counts(masks).to(torch.float64)
+    else:
+        m = masks.reshape(masks.shape[0], -1).to(torch.float64)
+        inter = m @ m.T
+    area = inter.diagonal()
     union = area[:, None] + area[None, :] - inter
     return torch.where(union > 0, inter / union.clamp(min=1), torch.ones_like(inter))
+
+
+_POPCOUNT = None  # (256,) uint8: set bits of each byte (numpy < 2 has no bitwise_count)
+
+
+def pair_counts(masks: torch.Tensor) -> torch.Tensor:
+    """``(K, K)`` long: the pixels each pair of ``K`` boolean masks shares (its diagonal: each mask's
+    own), by a population count of the masks packed 64 pixels to a word — a run's five reduced maps
+    of 1264 × 720 in about 0.5 ms instead of 15 for the float product.
+
+    Shape:
+        ``masks`` ``(K, ...)`` bool on the CPU.
+    """
+    import numpy as np
+
+    global _POPCOUNT
+    k = masks.shape[0]
+    packed = np.packbits(masks.reshape(k, -1).numpy(), axis=1)
+    packed = np.pad(packed, ((0, 0), (0, -packed.shape[1] % 8))).view(np.uint64)
+    if hasattr(np, "bitwise_count"):
+        count = lambda w: int(np.bitwise_count(w).sum(dtype=np.int64))  # noqa: E731
+    else:
+        if _POPCOUNT is None:
+            _POPCOUNT = np.array([bin(i).count("1") for i in range(256)], dtype=np.uint8)
+        count = lambda w: int(_POPCOUNT[w.view(np.uint8)].sum(dtype=np.int64))  # noqa: E731
+    out = torch.empty(k, k, dtype=torch.long)
+    for i in range(k):
+        for j in range(i, k):
+            out[i, j] = out[j, i] = count(packed[i] & packed[j])
+    return out
 
 
 def medoid(masks: torch.Tensor) -> tuple[int, float]:

@@ -323,7 +323,8 @@ def detect_runs(scene: Scene, segs: Iterable[Segmentation], ground: GroundPlane 
             return wide, per_map[0]
         held.append(compact(s))  # (a held int16 map is kept as it is, not copied)
         del s, wide  # not alive while the next set of maps is trained and labelled
-    chosen, members = choose(per_map)
+    with (timer or _Timer())("objects"):  # the consensus is step 1c's choice among the maps
+        chosen, members = choose(per_map)
     warn_fallbacks(scene.name, members)
     return merge_runs(held, chosen), members
 

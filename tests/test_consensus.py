@@ -52,6 +52,33 @@ def test_the_medoid_follows_the_majority_and_ties_go_to_the_first():
     assert medoid(torch.zeros(3, 4, 4, dtype=torch.bool)) == (0, 1.0)  # nothing kept, alike
 
 
+@pytest.mark.parametrize("packed", ["bitwise_count", "byte table"])
+def test_the_packed_pixel_counts_give_the_float_products_ious(packed, monkeypatch):
+    # the IoUs by a population count of the packed masks equal those of the float64 product of
+    # 0/1 masks to the bit, on sizes that do and do not fill a 64-pixel word; with numpy < 2 (no
+    # bitwise_count) a byte table counts the bits
+    import numpy as np
+
+    from somtorch.consensus import pair_counts
+
+    if packed == "byte table":
+        monkeypatch.delattr(np, "bitwise_count", raising=False)
+    g = torch.Generator().manual_seed(1)
+    for shape in [(5, 72, 126), (3, 7, 9), (1, 1), (4, 0), (2, 64), (3, 65)]:
+        masks = torch.rand(*shape, generator=g) > 0.4
+        if shape[0] > 1:
+            masks[1] = False  # an empty mask: agrees fully with another empty one only
+        flat = masks.reshape(shape[0], -1)
+        want = torch.stack([(flat[i] & flat).sum(1) for i in range(shape[0])])
+        assert torch.equal(pair_counts(masks), want)
+        m = flat.double()
+        inter, area = m @ m.T, m.sum(1)
+        union = area[:, None] + area[None, :] - inter
+        want_iou = torch.where(union > 0, inter / union.clamp(min=1), torch.ones_like(inter))
+        assert torch.equal(agreement(masks), want_iou)
+    assert torch.equal(agreement(masks.double()), agreement(masks))  # a non-boolean mask: the float product
+
+
 def test_map_seeds_are_distinct_32_bit_seeds_and_map_0_is_the_run_s_own():
     cfg = _cfg()
     assert shifted(cfg, 0) is cfg
