@@ -27,7 +27,7 @@ import torch
 
 from ..config import AreaConfig, ReductionConfig
 from ..config.objects import CONTINUOUS_SHARE
-from ..core.native import native_label_stats
+from ..core.label_stats import native_label_stats
 from .candidates import OUTCOMES, Candidate, unranked_areas, verdict
 from .ground import GroundPlane
 from .objects import (NeuronStats, ObjectArea, disparity_spread, find_object_areas, label_mask, neuron_stats,

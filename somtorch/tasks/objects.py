@@ -44,7 +44,7 @@ import torch
 
 from ..config import AreaConfig
 from ..config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX
-from ..core.native import native_label_stats
+from ..core.label_stats import native_label_stats
 from ..validation import check_tensor
 
 
@@ -149,7 +149,7 @@ def neuron_stats(labels: torch.Tensor, disparity: torch.Tensor, num_neurons: int
     """Statistics of the segments of one label map.
 
     Every statistic comes from one pass over the map: the native kernel's
-    (:func:`~somtorch.core.native.native_label_stats`) or, where it is unavailable, bincounts on
+    (:func:`~somtorch.core.label_stats.native_label_stats`) or, where it is unavailable, bincounts on
     labels, on (row, label) and (column, label) keys, and on the (label, label) keys of the
     4-connected pixel pairs — the same numbers, bit for bit.
 

@@ -1,4 +1,4 @@
-"""The object step's native pass over a label map (:func:`somtorch.core.native.native_label_stats`)
+"""The object step's native pass over a label map (:func:`somtorch.core.label_stats.native_label_stats`)
 against its definition in ``torch.bincount`` and against the torch path it replaces: the same
 numbers bit for bit, so ``SOMTORCH_NATIVE=0`` changes no kept box."""
 
@@ -11,7 +11,7 @@ import torch
 
 from somtorch.config import PipelineConfig
 from somtorch.core import native
-from somtorch.core.native import native_label_stats
+from somtorch.core.label_stats import native_label_stats
 from somtorch.disparity.loading import load_scene
 from somtorch.disparity.scene import scene_from_arrays
 from somtorch.pipeline import detect, on_support, prepare, read_map, segment_runs

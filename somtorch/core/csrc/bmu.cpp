@@ -12,7 +12,7 @@
 // does not depend on its lane, tile, thread, the number of threads, or the other members.
 //
 // Also: somtorch_label_stats, the object step's one pass over a label map (counts, sums, boxes and
-// the adjacency of 4-connected pixel pairs; see native_label_stats in native.py).
+// the adjacency of 4-connected pixel pairs; see somtorch/core/label_stats.py).
 //
 // Plain C ABI (called through ctypes); no torch headers, so it builds in about a second.
 // OpenMP comes from the libgomp that torch has already loaded (same soname), so it shares
