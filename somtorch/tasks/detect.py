@@ -301,14 +301,17 @@ def _parts(own: torch.Tensor, uncut: torch.Tensor | None, coverage: float, resid
     ``paper`` rule), one region holds all, or every part lies on the ground."""
     if uncut is None:
         return [own]
-    ids, counts = torch.unique(uncut[own], return_counts=True)
+    tally = torch.bincount(uncut[own])  # pixels per region id, the ids ascending (torch.unique's order)
+    ids = tally.nonzero().squeeze(1)
+    counts = tally[ids]
     if ids.numel() <= 1:
         return [own]
     order = torch.argsort(counts, descending=True, stable=True).tolist()
     total = float(own.sum())
-    parts = [own & (uncut == ids[i]) for i in order if i == order[0] or counts[i] > (1 - coverage) * total]
+    big = (counts > (1 - coverage) * total).tolist()  # one comparison for all regions, not one per region
+    parts = [own & (uncut == ids[i]) for i in order if i == order[0] or big[i]]
     if residual is not None and band > 0:
-        parts = [p for p in parts if float((residual[p] < band).double().mean()) <= 0.5]
+        parts = [p for p in parts if int(((residual < band) & p).sum()) / int(p.sum()) <= 0.5]
     return parts or [own]
 
 

@@ -129,4 +129,10 @@ def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = _
         crops.append(box_count(ii, (x0, y0, x1, y1)))
         mask[y0:y1 + 1, x0:x1 + 1] = True
     total = int(ii[-1, -1])
-    return Reduction(kept_boxes, mask, int((mask & valid).sum()), sum(crops), total, crops)
+    if len(kept_boxes) <= 1:  # one box: its valid count is the union's
+        kept = sum(crops)
+    else:  # the valid pixels of the union, counted inside the boxes' common extent only
+        x0, y0 = min(b[0] for b in kept_boxes), min(b[1] for b in kept_boxes)
+        x1, y1 = max(b[2] for b in kept_boxes), max(b[3] for b in kept_boxes)
+        kept = int((mask[y0:y1 + 1, x0:x1 + 1] & valid[y0:y1 + 1, x0:x1 + 1]).sum())
+    return Reduction(kept_boxes, mask, kept, sum(crops), total, crops)

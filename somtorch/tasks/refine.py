@@ -15,6 +15,7 @@ After :func:`~somtorch.tasks.objects.select_areas` ranks the candidate areas, ea
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import torch
@@ -178,12 +179,33 @@ def refine_box(area: ObjectArea, labels: torch.Tensor, *, coverage: float = _D.b
     pieces = pieces[order[: int(np.searchsorted(np.cumsum(sizes[order]), need - 1e-9)) + 1]]
     take = np.zeros(n, dtype=bool)
     take[pieces] = True
-    ys, xs = np.nonzero(take[comp])
+    sel = take[comp]
     q = min(max(quantile, 0.0), 0.5)
-    x0, x1 = np.quantile(xs, [q, 1 - q], method="inverted_cdf") if q > 0 else (xs.min(), xs.max())
-    y0, y1 = np.quantile(ys, [q, 1 - q], method="inverted_cdf") if q > 0 else (ys.min(), ys.max())
-    box = (int(x0), int(y0), int(x1), int(y1))
+    x0, x1 = _quantile_edges(sel.sum(0), q)
+    y0, y1 = _quantile_edges(sel.sum(1), q)
+    box = (x0, y0, x1, y1)
     return replace(area, box=box, segment_box=area.box, ground_clutter_pieces=dropped)
+
+
+def _quantile_edges(counts, q: float) -> tuple[int, int]:
+    """The ``q`` and ``1 − q`` quantiles of coordinates counted ``counts[i]`` times each (a mask's
+    column or row sums): ``numpy.quantile(coords, [q, 1 - q], method="inverted_cdf")`` of the
+    coordinates listed pixel by pixel, the same order statistics by numpy's index arithmetic, read
+    off the cumulative counts instead of partitioning every pixel's coordinate (``q`` 0: the first
+    and the last counted coordinate)."""
+    import numpy as np
+
+    cum = np.cumsum(counts)
+    n = int(cum[-1])
+
+    def rank(p: float) -> int:  # numpy's inverted_cdf: index n·p − 1, rounded up where fractional
+        index = n * p - 1
+        k = math.floor(index)
+        return max(k if index - k == 0 else k + 1, 0)
+
+    lo, hi = (rank(q), rank(1 - q)) if q > 0 else (0, n - 1)
+    # the (k+1)-th smallest coordinate: the first whose cumulative count exceeds k
+    return int(np.searchsorted(cum, lo, side="right")), int(np.searchsorted(cum, hi, side="right"))
 
 
 def box_purity(area: ObjectArea, labels: torch.Tensor, valid_integral: torch.Tensor,

@@ -79,7 +79,13 @@ def score_reduction(reduction: Reduction, object_mask: torch.Tensor, valid: torc
     n_obj = int(obj.sum())
     if n_obj == 0:
         raise ValueError("the object has no pixel with a valid disparity: it cannot be scored")
-    frac = int((obj & reduction.mask).sum()) / n_obj
+    if reduction.boxes:  # the kept pixels lie inside the boxes: count there only
+        x0, y0 = min(b[0] for b in reduction.boxes), min(b[1] for b in reduction.boxes)
+        x1, y1 = max(b[2] for b in reduction.boxes), max(b[3] for b in reduction.boxes)
+        inside = int((obj[y0:y1 + 1, x0:x1 + 1] & reduction.mask[y0:y1 + 1, x0:x1 + 1]).sum())
+    else:
+        inside = int((obj & reduction.mask).sum())
+    frac = inside / n_obj
     if x_opt is None:
         x_opt = optimal_reduction(object_mask, valid)
     red = reduction.reduction_union

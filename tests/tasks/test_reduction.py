@@ -72,25 +72,29 @@ def test_no_box_keeps_nothing():
     assert r.reduction_union == 100.0
 
 
-def test_integral_image_counts_equal_brute_force_mask_sums():
-    g = torch.Generator().manual_seed(7)
-    h, w = 53, 71
-    valid = torch.rand(h, w, generator=g) > 0.35
-    boxes = []
-    for _ in range(12):
-        x0, x1 = sorted(torch.randint(0, w, (2,), generator=g).tolist())
-        y0, y1 = sorted(torch.randint(0, h, (2,), generator=g).tolist())
-        boxes.append((x0, y0, x1, y1))
-    r = reduce_map(boxes, valid, tolerance_px=1.5, tolerance_frac=0.1, tolerance_image=0.0)
-    union = torch.zeros(h, w, dtype=torch.bool)
-    for (x0, y0, x1, y1), n in zip(r.boxes, r.crops_valid, strict=True):
-        assert 0 <= x0 <= x1 < w and 0 <= y0 <= y1 < h
-        assert n == int(valid[y0:y1 + 1, x0:x1 + 1].sum())
-        union[y0:y1 + 1, x0:x1 + 1] = True
-    assert torch.equal(r.mask, union)
-    assert r.kept_union == int((union & valid).sum())
-    assert r.kept_crops == sum(r.crops_valid)
-    assert r.valid_total == int(valid.sum())
+@pytest.mark.parametrize("n_boxes", [1, 2, 3, 12])
+def test_integral_image_counts_equal_brute_force_mask_sums(n_boxes):
+    # the union's count is read off the integral image for one box and inside the boxes' common
+    # extent for several: both must equal the whole map's mask sum
+    for seed in range(6):
+        g = torch.Generator().manual_seed(7 + seed)
+        h, w = 53, 71
+        valid = torch.rand(h, w, generator=g) > 0.35
+        boxes = []
+        for _ in range(n_boxes):
+            x0, x1 = sorted(torch.randint(0, w, (2,), generator=g).tolist())
+            y0, y1 = sorted(torch.randint(0, h, (2,), generator=g).tolist())
+            boxes.append((x0, y0, x1, y1))
+        r = reduce_map(boxes, valid, tolerance_px=1.5, tolerance_frac=0.1, tolerance_image=0.0)
+        union = torch.zeros(h, w, dtype=torch.bool)
+        for (x0, y0, x1, y1), n in zip(r.boxes, r.crops_valid, strict=True):
+            assert 0 <= x0 <= x1 < w and 0 <= y0 <= y1 < h
+            assert n == int(valid[y0:y1 + 1, x0:x1 + 1].sum())
+            union[y0:y1 + 1, x0:x1 + 1] = True
+        assert torch.equal(r.mask, union)
+        assert r.kept_union == int((union & valid).sum())
+        assert r.kept_crops == sum(r.crops_valid)
+        assert r.valid_total == int(valid.sum())
 
 
 def test_reduce_map_rejects_bad_arguments():

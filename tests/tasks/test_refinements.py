@@ -39,6 +39,41 @@ def test_refine_box_quantile_ignores_a_thin_protrusion():
     assert refine_box(area, labels, coverage=1.0, quantile=0.0001).box == area.box  # 1 px: kept
 
 
+def test_the_box_edges_are_numpys_inverted_cdf_quantiles_of_the_kept_pixels():
+    # refine_box reads the quantile edges off the mask's column and row sums; they must be the order
+    # statistics numpy.quantile(..., method="inverted_cdf") picks from every pixel's coordinate,
+    # including its index arithmetic at n·q whole or fractional, one pixel, and q = 0 (min / max)
+    import numpy as np
+
+    from somtorch.tasks.refine import _quantile_edges
+
+    rng = np.random.default_rng(7)
+    checked = 0
+    for t in range(400):
+        h, w = (int(v) for v in rng.integers(1, 70, 2))
+        mask = rng.random((h, w)) < [0.002, 0.05, 0.5, 0.999][t % 4]
+        if t % 7 == 0:
+            mask[:] = False
+            mask[int(rng.integers(0, h)), int(rng.integers(0, w))] = True
+        if not mask.any():
+            continue
+        ys, xs = np.nonzero(mask)
+        for q in (0.0, 0.001, 0.005, 0.01, 0.25, 1 / 3, 0.5):
+            for coords, counts in ((xs, mask.sum(0)), (ys, mask.sum(1))):
+                want = (coords.min(), coords.max()) if q == 0 else \
+                    np.quantile(coords, [q, 1 - q], method="inverted_cdf")
+                assert _quantile_edges(counts, q) == tuple(int(v) for v in want), (t, q)
+                checked += 1
+    assert checked > 4000
+    # counts in the thousands per coordinate: n·q far from whole numbers and exactly on them
+    for n_each in (1, 3, 999, 1000, 4096):
+        counts = np.full(37, n_each)
+        coords = np.repeat(np.arange(37), n_each)
+        for q in (0.001, 0.01, 0.1):
+            assert _quantile_edges(counts, q) == tuple(
+                int(v) for v in np.quantile(coords, [q, 1 - q], method="inverted_cdf"))
+
+
 def test_refine_box_leaves_out_pieces_flat_on_the_ground_plane():
     labels = torch.full((120, 160), 1, dtype=torch.long)
     residual = torch.full((120, 160), 5.0)  # |disparity - ground plane| in px
