@@ -301,17 +301,21 @@ def _parts(own: torch.Tensor, uncut: torch.Tensor | None, coverage: float, resid
     ``paper`` rule), one region holds all, or every part lies on the ground."""
     if uncut is None:
         return [own]
-    tally = torch.bincount(uncut[own])  # pixels per region id, the ids ascending (torch.unique's order)
+    vals = uncut[own]
+    tally = torch.bincount(vals)  # pixels per region id, the ids ascending (torch.unique's order)
     ids = tally.nonzero().squeeze(1)
     counts = tally[ids]
     if ids.numel() <= 1:
         return [own]
     order = torch.argsort(counts, descending=True, stable=True).tolist()
-    total = float(own.sum())
+    total = float(vals.numel())
     big = (counts > (1 - coverage) * total).tolist()  # one comparison for all regions, not one per region
-    parts = [own & (uncut == ids[i]) for i in order if i == order[0] or big[i]]
-    if residual is not None and band > 0:
-        parts = [p for p in parts if int(((residual < band) & p).sum()) / int(p.sum()) <= 0.5]
+    chosen = [i for i in order if i == order[0] or big[i]]
+    if residual is not None and band > 0:  # each region's pixels within the band, counted at once
+        low = torch.bincount(uncut[own & (residual < band)], minlength=tally.numel()).tolist()
+        n_l, id_l = tally.tolist(), ids.tolist()
+        chosen = [i for i in chosen if low[id_l[i]] / n_l[id_l[i]] <= 0.5]
+    parts = [own & (uncut == ids[i]) for i in chosen]
     return parts or [own]
 
 

@@ -359,8 +359,8 @@ def areas_of(comps: list[list[int]], stats: NeuronStats) -> list[ObjectArea]:
     count, box, mean disparity, contrast and share of the segmented pixels; empty groups are left out."""
     # per-component sums as (C, K) one-hot products: one pass instead of a loop of small tensor ops
     onehot = torch.zeros(len(comps), int(stats.count.shape[0]), dtype=torch.float64)
-    for i, comp in enumerate(comps):
-        onehot[i, comp] = 1.0
+    rows = [i for i, comp in enumerate(comps) for _ in comp]
+    onehot[rows, [j for comp in comps for j in comp]] = 1.0
     cnt = stats.count.double()
     md = torch.nan_to_num(stats.mean_d.double())
     n_px = onehot @ cnt
@@ -379,13 +379,15 @@ def areas_of(comps: list[list[int]], stats: NeuronStats) -> list[ObjectArea]:
     x1 = torch.where(member, stats.box[None, :, 2], -1).amax(1)
     y1 = torch.where(member, stats.box[None, :, 3], -1).amax(1)
     total = float(stats.count.sum())
+    # as Python numbers once, not one tensor element at a time
+    n_l, mean_l, con_l = n_px.tolist(), mean.tolist(), contrast.tolist()
+    boxes = torch.stack([x0, y0, x1, y1], 1).tolist()
     areas = []
     for i, comp in enumerate(comps):
-        n = float(n_px[i])
+        n = n_l[i]
         if n == 0:
             continue
-        areas.append(ObjectArea(comp, int(n), (int(x0[i]), int(y0[i]), int(x1[i]), int(y1[i])), float(mean[i]),
-                                float(contrast[i]), n / total))
+        areas.append(ObjectArea(comp, int(n), tuple(boxes[i]), mean_l[i], con_l[i], n / total))
     return areas
 
 
