@@ -218,12 +218,14 @@ class ObjectSetup:
     integral: torch.Tensor
     obj_mask: torch.Tensor | None
     x_opt: float | None
-    segmented: torch.Tensor  # (H, W) bool: the pixels every map of the run labels
 
     def serves(self, labels: torch.Tensor) -> bool:
-        """Whether a map's ``(E, H, W)`` labels segment the pixels this setup was built for."""
-        return tuple(labels.shape[-2:]) == tuple(self.segmented.shape) and \
-            torch.equal(labels[0] >= 0, self.segmented)
+        """Whether a map's ``(E, H, W)`` labels segment the pixels this setup was built for: the
+        scene's size, and on the object step's grid (every ``stride``-th pixel, all the setup reads
+        of a map: ``ctx.usable``) the same labelled pixels."""
+        s = self.stride
+        return tuple(labels.shape[-2:]) == tuple(self.scene.valid.shape) and \
+            torch.equal(labels[0, ::s, ::s] >= 0, self.ctx.usable)
 
 
 def object_setup(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None, cfg: PipelineConfig
@@ -239,7 +241,7 @@ def object_setup(scene: Scene, labels: torch.Tensor, ground: GroundPlane | None,
     if scene.objects is not None:
         obj_mask = scene.scored_mask(cfg.object_id)
         x_opt = optimal_reduction(obj_mask, scene.valid, integral)  # the same for every member
-    return ObjectSetup(scene, ground, st, ocfg, ctx, integral, obj_mask, x_opt, labels[0] >= 0)
+    return ObjectSetup(scene, ground, st, ocfg, ctx, integral, obj_mask, x_opt)
 
 
 def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: PipelineConfig,

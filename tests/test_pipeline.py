@@ -303,6 +303,24 @@ def test_a_map_resampled_from_a_coarser_grid_reads_its_own_noise():
     assert window >= 3
 
 
+def test_the_noise_reading_steps_over_rows_to_at_most_half_a_million_pixels():
+    """noise_sigma reads every k-th row of a large map, k rounded up so that it reads at most about
+    half a million pixels: a 720 × 1000 map (720,000 px) is read on its even rows (k = 2), 1 px of
+    noise on them is read in full, and on the odd rows not at all."""
+    from somtorch.tasks.ground import noise_sigma
+
+    ys, xs = torch.meshgrid(torch.arange(720.0), torch.arange(1000.0), indexing="ij")
+    clean = 30.0 + 0.01 * xs + 0.02 * ys
+    noise = torch.randn(360, 1000, generator=torch.Generator().manual_seed(3))
+    ones = torch.ones(720, 1000, dtype=torch.bool)
+    even, odd = clean.clone(), clean.clone()
+    even[0::2] += noise
+    odd[1::2] += noise
+    assert noise_sigma(even, ones) == pytest.approx(1.0, rel=0.05)
+    assert noise_sigma(even, ones) == noise_sigma(even[::2], ones[::2])  # 360,000 px: every row of them
+    assert noise_sigma(odd, ones) < 1e-4
+
+
 def test_the_noise_is_measured_once_whether_the_map_is_filtered_or_not(monkeypatch):
     """The median's trigger and the ground band read the same σ, measured once: on a map read as
     given the band takes it as measured; on a noisy one, filtered, what the median leaves of it
@@ -456,6 +474,19 @@ def test_an_object_setup_serves_only_the_pixels_it_was_built_for(motorcycle):
     assert [_areas_key(m) for m in given] == [_areas_key(m) for m in built]
     assert [_kept_key(m) for m in given] != [_kept_key(m) for m in detect(scene, seg, ground, cfg, warn=False,
                                                                             setup=setup)]
+    # the setup reads a map on the object step's grid only (every 2nd pixel): a map that differs off
+    # it is served, and the step keeps what a setup built for it keeps
+    off = seg.labels.clone()
+    off[:, 1::2, 1::2] = -1  # no sampled pixel changes
+    assert setup.serves(off) and not torch.equal(off >= 0, seg.labels >= 0)
+    other = replace(seg, labels=off)
+    given, built = (detect(scene, other, ground, cfg, warn=False, setup=s) for s in (setup, None))
+    assert [_kept_key(m) for m in given] == [_kept_key(m) for m in built]
+    assert [_areas_key(m) for m in given] == [_areas_key(m) for m in built]
+    ys, xs = (seg.labels[0, ::2, ::2] >= 0).nonzero(as_tuple=True)
+    one = seg.labels.clone()
+    one[:, 2 * int(ys[0]), 2 * int(xs[0])] = -1  # one sampled pixel no longer labelled
+    assert not setup.serves(one)
 
 
 def test_a_bent_support_is_re_expressed_on_the_strided_map():

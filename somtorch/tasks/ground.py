@@ -231,7 +231,7 @@ def noise_sigma(disparity: torch.Tensor, valid: torch.Tensor) -> float:
         ``disparity``, ``valid`` ``(H, W)``.
     """
     h, w = disparity.shape
-    k = max(1, (h * w) // 500_000)
+    k = max(1, -(-(h * w) // 500_000))  # rounded up: at most half a million pixels read
     disparity, valid = disparity[::k], valid[::k]
     sigma = 0.0
     for lag in (1, 2):
