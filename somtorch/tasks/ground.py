@@ -45,6 +45,7 @@ import torch
 
 from ..config import GroundConfig
 from ..config.options import GROUND_RULES as RULES
+from ..core.plane_counts import native_plane_counts
 from ..validation import check_tensor
 from .support_surface import own_band, own_surface, plane_fit, surface_map
 
@@ -107,9 +108,12 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     n_valid = int(ok.sum())
     if n_valid < 10:
         return None
-    dv = disparity[ok].double()
-    if dv.numel() > 20_000:
-        dv = dv[torch.randint(dv.numel(), (20_000,), generator=torch.Generator().manual_seed(seed))]
+    yx_ok = ok.nonzero()  # the valid pixels in row-major order, as disparity[ok] lists them
+    if n_valid > 20_000:  # a sample of disparity[ok], read at its pixels rather than gathered whole
+        pick = yx_ok[torch.randint(n_valid, (20_000,), generator=torch.Generator().manual_seed(seed))]
+        dv = disparity[pick[:, 0], pick[:, 1]].double()
+    else:
+        dv = disparity[ok].double()
     m = dv.numel()
     lo_q = dv.kthvalue(max(1, int(0.01 * m))).values
     hi_q = dv.kthvalue(max(1, int(0.99 * m))).values
@@ -150,17 +154,23 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
         return None
     # each hypothesis's residual at each sampled pixel in float32 (disparities of a few hundred px, a
     # band of at least tol_px: far above its rounding); element-wise, so the same bits at any thread
-    # count; computed once for every band tried below
-    resid = (_predict(coef, pts) - pts[None, :, 2].float()).abs_()  # (I, N)
+    # count: counted by the native kernel, or computed once for every band tried below
+    resid: torch.Tensor | None = None
     # the support-surface tests are constraints of the model, checked on a sample of the whole map
     # for every hypothesis: the best plane that passes them, not the best plane, is tested on the
     # full map (a single best hypothesis near a test's threshold made the verdict a lottery of the
     # RANSAC seed)
-    q = _sample(ok.nonzero(), disparity, cfg.sample, g)
+    q = _sample(yx_ok, disparity, cfg.sample, g)
     rim = view_rim(ok)
     on_rim = _sample(rim.nonzero(), disparity, cfg.sample, g)
 
     def inliers(band: float) -> torch.Tensor:
+        nonlocal resid
+        got = native_plane_counts(coef, pts, band, tests=False)
+        if got is not None:
+            return got[0].masked_fill(~plausible, -1)
+        if resid is None:
+            resid = (_predict(coef, pts) - pts[None, :, 2].float()).abs_()  # (I, N)
         return (resid < band).sum(1).masked_fill(~plausible, -1)
 
     def best_plane(band: float, score: torch.Tensor) -> GroundPlane | None:
@@ -273,15 +283,21 @@ def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, rim: torch.Tensor, tol:
     ``(N, 3)`` rows (x, y, d) of the whole map and ``rim`` ``(M, 3)`` of the view's rim (the
     full-map tests of :func:`_verified`, estimated).
     ``oriented`` ``(I,)``: the hypotheses that pass the position rule's orientation test."""
-    pred = _predict(coef, q)  # (I, N)
-    d = q[None, :, 2].float()
-    inl = (pred - d).abs() < tol
-    share = inl.float().mean(1)
+    got = native_plane_counts(coef, q, tol)
+    rim_got = None if got is None else native_plane_counts(coef, rim, tol, tests=False)
+    if got is not None and rim_got is not None:  # the counts of the (I, N) comparisons below
+        n_in, n_seen, n_behind = got
+        # a mean of 0 / 1 values is their count over N in float32, the same bits
+        share, on_rim = n_in.float() / q.shape[0], rim_got[0].float() / rim.shape[0]
+    else:
+        pred = _predict(coef, q)  # (I, N)
+        d = q[None, :, 2].float()
+        share = ((pred - d).abs() < tol).float().mean(1)
+        seen = pred > tol
+        n_seen, n_behind = seen.sum(1), (seen & (d < pred - tol)).sum(1)
+        on_rim = ((_predict(coef, rim) - rim[None, :, 2].float()).abs() < tol).float().mean(1)
     ok = share >= cfg.min_inlier_frac
-    seen = pred > tol
-    behind = seen & (d < pred - tol)
-    hides = behind.sum(1) <= cfg.max_below_frac * seen.sum(1).clamp_min(1)  # a floor hides what lies beneath
-    on_rim = ((_predict(coef, rim) - rim[None, :, 2].float()).abs() < tol).float().mean(1)
+    hides = n_behind <= cfg.max_below_frac * n_seen.clamp_min(1)  # a floor hides what lies beneath
     surrounds = (on_rim >= cfg.support_frac) & hides
     return ok & _either(cfg.rule, oriented & hides, (share >= cfg.support_frac) | surrounds)
 

@@ -288,3 +288,30 @@ def test_the_behind_test_keeps_a_large_box_front_face_out_of_the_ground_of_a_for
         assert g is not None and int((g.mask & obj).sum()) <= 0.2 * int(obj.sum())
         off = fit_ground_plane(d, valid, GroundConfig(max_below_frac=1.0), seed=seed)
         assert off is not None and int((off.mask & obj).sum()) >= 0.9 * int(obj.sum())
+
+
+def test_the_native_ransac_counts_give_the_planes_of_the_torch_path(kernel, monkeypatch):
+    # the hypotheses' inlier, in-view and behind counts come from the native kernel where it loads;
+    # the plane found (coefficients, band, mask, verdicts) must be the torch path's to the bit, on
+    # noisy floors at every pitch and rule, with and without objects, and on Motorcycle
+    from dataclasses import astuple
+
+    from somtorch.disparity import load_scene
+
+    maps = [render(p, cubes(p), noise_px=n, seed=p)[:2] for p in (15, 45, 75) for n in (0.0, 0.3)]
+    moto = load_scene("motorcycle")
+    maps.append((moto.disparity, moto.valid))
+    found = 0
+    for rule in ("position", "either", "support"):
+        cfg = GroundConfig(rule=rule)
+        for d, v in maps:
+            monkeypatch.delenv("SOMTORCH_NATIVE", raising=False)
+            fast = fit_ground_plane(d, v, cfg)
+            monkeypatch.setenv("SOMTORCH_NATIVE", "0")
+            slow = fit_ground_plane(d, v, cfg)
+            assert (fast is None) == (slow is None)
+            if fast is not None:
+                found += 1
+                a, b = astuple(fast), astuple(slow)
+                assert all(torch.equal(x, y) if isinstance(x, torch.Tensor) else x == y for x, y in zip(a, b))
+    assert found >= 10  # planes were found and compared, not only refusals

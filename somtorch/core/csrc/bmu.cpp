@@ -12,7 +12,9 @@
 // does not depend on its lane, tile, thread, the number of threads, or the other members.
 //
 // Also: somtorch_label_stats, the object step's one pass over a label map (counts, sums, boxes and
-// the adjacency of 4-connected pixel pairs; see somtorch/core/label_stats.py).
+// the adjacency of 4-connected pixel pairs; see somtorch/core/label_stats.py), and
+// somtorch_plane_counts, the ground fit's counts of each plane hypothesis over sampled pixels
+// (inliers, in view, behind; see somtorch/core/plane_counts.py).
 //
 // Plain C ABI (called through ctypes); no torch headers, so it builds in about a second.
 // OpenMP comes from the libgomp that torch has already loaded (same soname), so it shares
@@ -875,12 +877,47 @@ int label_stats(const int64_t* lab, int64_t H, int64_t W, int64_t K, const doubl
   return 0;
 }
 
+// The counts the ground fit's RANSAC needs of each plane hypothesis on sampled pixels (see
+// somtorch/tasks/ground.py, _predict and _passes_sampled), as torch computes them in float32:
+// pred = c0*x + c1*y + c2 with c the hypothesis rounded to float32 and each product and sum rounded
+// (no fused multiply-add: the library is built with -ffp-contract=off); a pixel is an inlier where
+// |pred - d| < tol, seen where pred > tol, behind where seen and d < pred - tol (tol as float32).
+int plane_counts(const double* coef, int64_t I, const float* xs, const float* ys, const float* ds, int64_t N,
+                 float tol, int64_t* inl, int64_t* seen, int64_t* behind) {
+  if (I < 0 || N < 0) return 1;
+  for (int64_t i = 0; i < I; ++i) {
+    const float a = (float)coef[3 * i], b = (float)coef[3 * i + 1], c = (float)coef[3 * i + 2];
+    int64_t n_in = 0, n_seen = 0, n_behind = 0;
+    for (int64_t j0 = 0; j0 < N; j0 += 1 << 20) {  // int32 counters (vector lanes) per block
+      const int64_t j1 = j0 + (1 << 20) < N ? j0 + (1 << 20) : N;
+      int32_t b_in = 0, b_seen = 0, b_behind = 0;
+      for (int64_t j = j0; j < j1; ++j) {  // branch-free, so that it vectorises
+        const float ax = a * xs[j];
+        const float by = b * ys[j];
+        const float pred = (ax + by) + c;
+        const float r = pred - ds[j];
+        const int32_t sn = pred > tol;
+        b_in += std::fabs(r) < tol;
+        b_seen += sn;
+        b_behind += sn & (ds[j] < pred - tol);
+      }
+      n_in += b_in;
+      n_seen += b_seen;
+      n_behind += b_behind;
+    }
+    inl[i] = n_in;
+    if (seen != nullptr) seen[i] = n_seen;
+    if (behind != nullptr) behind[i] = n_behind;
+  }
+  return 0;
+}
+
 }  // namespace
 
 extern "C" {
 
 // Version of this C ABI; native.py refuses a library that reports another one.
-int somtorch_bmu_abi(void) { return 5; }
+int somtorch_bmu_abi(void) { return 6; }
 
 int somtorch_bmu_f32(const float* x, int64_t x_stride, const float* w, int64_t E, int64_t N,
                      int64_t K, int64_t D, int top, int64_t* out, int nthreads) {
@@ -938,6 +975,11 @@ int somtorch_label_stats(const int64_t* lab, int64_t H, int64_t W, int64_t K, co
                          double* sums, int64_t* box, int64_t* pairs, int64_t* cpairs, int64_t* gcount) {
   return label_stats(lab, H, W, K, wts, M, cont, groups, G, do_pairs, count, sums, box, pairs, cpairs,
                      gcount);
+}
+
+int somtorch_plane_counts(const double* coef, int64_t I, const float* xs, const float* ys, const float* ds,
+                          int64_t N, float tol, int64_t* inl, int64_t* seen, int64_t* behind) {
+  return plane_counts(coef, I, xs, ys, ds, N, tol, inl, seen, behind);
 }
 
 }  // extern "C"

@@ -1,0 +1,65 @@
+"""Counts of plane hypotheses over sampled points, in the native library of
+:mod:`somtorch.core.native` (``somtorch_plane_counts`` in ``csrc/bmu.cpp``): for each hypothesis
+``z = a·x + b·y + c`` and each point ``(x, y, z)``, the float32 prediction as torch computes it
+(the hypothesis rounded to float32, each product and sum rounded), and how many points lie within
+a band of it, how many are predicted above the band, and how many of those lie beneath the band —
+the counts of the ``(I, N)`` comparisons torch would materialise, without materialising them.
+It knows nothing of disparity: the ground fit (:func:`somtorch.tasks.ground.fit_ground_plane`)
+passes its hypotheses and sampled pixels, and keeps its torch path for when
+:func:`native_plane_counts` returns None.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from .native import enabled, library
+
+__all__ = ["native_plane_counts", "torch_plane_counts"]
+
+
+def torch_plane_counts(coef: torch.Tensor, pts: torch.Tensor, tol: float, *, tests: bool = True
+                       ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+    """The definition :func:`native_plane_counts` reproduces, in torch: ``(inliers, seen, behind)``
+    ``(I,)`` long each (``seen`` and ``behind`` None without ``tests``) for the hypotheses ``coef``
+    ``(I, 3)`` (a, b, c) over the points ``pts`` ``(N, 3)`` rows (x, y, z): ``|pred − z| < tol``,
+    ``pred > tol``, and ``pred > tol`` with ``z < pred − tol``, ``pred`` and every comparison in
+    float32."""
+    c = coef.float()
+    x, y = pts[None, :, 0].float(), pts[None, :, 1].float()
+    pred = c[:, 0:1] * x + c[:, 1:2] * y + c[:, 2:3]
+    z = pts[None, :, 2].float()
+    inl = ((pred - z).abs() < tol).sum(1)
+    if not tests:
+        return inl, None, None
+    seen = pred > tol
+    return inl, seen.sum(1), (seen & (z < pred - tol)).sum(1)
+
+
+@torch.no_grad()
+def native_plane_counts(coef: torch.Tensor, pts: torch.Tensor, tol: float, *, tests: bool = True
+                        ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None] | None:
+    """:func:`torch_plane_counts` in one native pass (single-threaded; 400 hypotheses × 5,000 points
+    in a few milliseconds), the same integers; None where the kernel cannot serve the call
+    (``SOMTORCH_NATIVE=0``, no library, tensors off the CPU or of other shapes).
+
+    Shape:
+        ``coef`` ``(I, 3)``; ``pts`` ``(N, 3)``.
+    """
+    if not enabled() or coef.device.type != "cpu" or pts.device.type != "cpu" or coef.ndim != 2 \
+            or coef.shape[1] != 3 or pts.ndim != 2 or pts.shape[1] != 3:
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    i, n = int(coef.shape[0]), int(pts.shape[0])
+    cf = coef.double().contiguous()
+    xs, ys, zs = (pts[:, k].float().contiguous() for k in range(3))
+    inl = torch.zeros(i, dtype=torch.long)
+    seen = torch.zeros(i, dtype=torch.long) if tests else None
+    behind = torch.zeros(i, dtype=torch.long) if tests else None
+    rc = lib.somtorch_plane_counts(cf.data_ptr(), i, xs.data_ptr(), ys.data_ptr(), zs.data_ptr(), n,
+                                   float(torch.tensor(tol, dtype=torch.float32)), inl.data_ptr(),
+                                   None if seen is None else seen.data_ptr(),
+                                   None if behind is None else behind.data_ptr())
+    return (inl, seen, behind) if rc == 0 else None
