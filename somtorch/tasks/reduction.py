@@ -87,6 +87,12 @@ def box_count(integral: torch.Tensor, box: Box) -> int:
     return int(ii[y1 + 1, x1 + 1] - ii[y0, x1 + 1] - ii[y1 + 1, x0] + ii[y0, x0])
 
 
+def extent(boxes: list[Box]) -> Box:
+    """The smallest box (x0, y0, x1, y1, inclusive) holding every box of ``boxes`` (not empty)."""
+    return (min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes),
+            max(b[3] for b in boxes))
+
+
 def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = _R.tolerance_px,
                tolerance_frac: float = _R.tolerance_frac, tolerance_image: float = _R.tolerance_image,
                integral: torch.Tensor | None = None) -> Reduction:
@@ -132,7 +138,6 @@ def reduce_map(boxes: list[Box], valid: torch.Tensor, *, tolerance_px: float = _
     if len(kept_boxes) <= 1:  # one box: its valid count is the union's
         kept = sum(crops)
     else:  # the valid pixels of the union, counted inside the boxes' common extent only
-        x0, y0 = min(b[0] for b in kept_boxes), min(b[1] for b in kept_boxes)
-        x1, y1 = max(b[2] for b in kept_boxes), max(b[3] for b in kept_boxes)
+        x0, y0, x1, y1 = extent(kept_boxes)
         kept = int((mask[y0:y1 + 1, x0:x1 + 1] & valid[y0:y1 + 1, x0:x1 + 1]).sum())
     return Reduction(kept_boxes, mask, kept, sum(crops), total, crops)

@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 import torch
 
 from ..validation import check_tensor
-from .reduction import Reduction, reduce_map
+from .reduction import Reduction, extent, reduce_map
 
 #: The paper's useful hit: at least this share of the object identified …
 IDENTIFIED = 0.95
@@ -80,8 +80,7 @@ def score_reduction(reduction: Reduction, object_mask: torch.Tensor, valid: torc
     if n_obj == 0:
         raise ValueError("the object has no pixel with a valid disparity: it cannot be scored")
     if reduction.boxes:  # the kept pixels lie inside the boxes: count there only
-        x0, y0 = min(b[0] for b in reduction.boxes), min(b[1] for b in reduction.boxes)
-        x1, y1 = max(b[2] for b in reduction.boxes), max(b[3] for b in reduction.boxes)
+        x0, y0, x1, y1 = extent(reduction.boxes)
         inside = int((obj[y0:y1 + 1, x0:x1 + 1] & reduction.mask[y0:y1 + 1, x0:x1 + 1]).sum())
     else:
         inside = int((obj & reduction.mask).sum())
