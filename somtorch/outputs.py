@@ -22,7 +22,7 @@ from .config import OutputConfig  # noqa: F401  (re-exported: the output group's
 from .evaluation import summary_stats
 from .disparity.scene import Scene
 from .pipeline import PipelineResult
-from .tasks.detect import object_mode
+from .tasks.context import object_mode
 from .tasks.segmentation import color_map, grey_map
 
 log = logging.getLogger(__name__)
@@ -109,7 +109,7 @@ def summarize(scene: Scene, result: PipelineResult, config: dict[str, Any] | Non
 
 
 def object_step(result: PipelineResult) -> dict[str, str] | None:
-    """How step 1c linked and ranked the areas, and why (:func:`~somtorch.tasks.detect.object_mode`):
+    """How step 1c linked and ranked the areas, and why (:func:`~somtorch.tasks.context.object_mode`):
     ``{"mode": "support" | "contrast" | "paper", "reason": ...}``; ``"contrast"`` is the fallback of
     the default rule where no support plane was verified. None for a run without a SOM config."""
     if result.config is None:

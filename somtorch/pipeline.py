@@ -32,7 +32,8 @@ from .fallbacks import fallback_summary, warn_fallbacks  # noqa: F401  (fallback
 from .resources import Estimate, estimate
 from .results import MemberResult, PipelineResult
 from .segmenters import METHODS, SEGMENTERS, Segmentation, run_segmenter
-from .tasks.detect import MapContext, find_objects, first_place
+from .tasks.context import MapContext
+from .tasks.detect import find_objects, first_place
 from .tasks.ground import GroundPlane, fit_ground_plane, noise_sigma
 from .tasks.objects import ObjectArea
 from .tasks.reduction import Reduction, reduce_map, valid_integral
@@ -206,7 +207,7 @@ def on_support(scene: Scene, ground: GroundPlane | None,
 class ObjectSetup:
     """What the object step reads of a scene, the same for every map of a run (each segments the
     same pixels): the scene and plane of :func:`on_support`, the object step's stride, the
-    :class:`~somtorch.tasks.detect.MapContext` of the strided map, the reduction's valid-pixel
+    :class:`~somtorch.tasks.context.MapContext` of the strided map, the reduction's valid-pixel
     integral at full size, the scored mask and its ``x_opt``. Built by :func:`object_setup`, once
     per run rather than once per map (:func:`detect_runs`)."""
 

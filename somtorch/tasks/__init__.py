@@ -1,7 +1,8 @@
 """Tasks on a trained SOM over a disparity map: segmentation, object areas, data reduction, scoring."""
 
 from .objects import AreaConfig, ObjectArea, find_object_areas, neuron_stats, select_areas
-from .detect import MapContext, ObjectResult, find_objects, kept_areas
+from .context import MapContext
+from .detect import ObjectResult, find_objects, kept_areas
 from .reduction import Reduction, reduce_map
 from .scoring import Score, score_reduction
 from .segmentation import color_map, grey_map, segment

@@ -6,7 +6,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from somtorch.tasks.detect import MapContext, first_place, kept_areas
+from somtorch.tasks.context import MapContext
+from somtorch.tasks.detect import first_place, kept_areas
 from somtorch.tasks.objects import AreaConfig, select_areas
 
 from .toys import flat_segments

@@ -9,7 +9,8 @@ import dataclasses
 import torch
 
 from somtorch.config import AreaConfig
-from somtorch.tasks.detect import MapContext, find_objects
+from somtorch.tasks.context import MapContext
+from somtorch.tasks.detect import find_objects
 from somtorch.tasks.ground import GroundPlane
 from somtorch.tasks.refine import solidity_square
 

@@ -9,7 +9,8 @@ from dataclasses import replace
 import pytest
 import torch
 
-from somtorch.tasks.detect import MapContext, kept_areas
+from somtorch.tasks.context import MapContext
+from somtorch.tasks.detect import kept_areas
 from somtorch.tasks.objects import AreaConfig, areas_of, find_object_areas, neuron_stats, rank_score, select_areas
 from somtorch.tasks.refine import merge_adjacent, with_grown_contrast
 

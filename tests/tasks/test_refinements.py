@@ -7,7 +7,8 @@ import torch
 
 from somtorch.disparity.filters import remove_speckles
 from somtorch.tasks.objects import AreaConfig, ObjectArea, find_object_areas, neuron_stats, select_areas
-from somtorch.tasks.detect import MapContext, find_objects, kept_areas
+from somtorch.tasks.context import MapContext
+from somtorch.tasks.detect import find_objects, kept_areas
 from somtorch.tasks.refine import box_purity, merge_adjacent, refine_box, solidity
 from somtorch.tasks.reduction import valid_integral
 

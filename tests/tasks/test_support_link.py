@@ -15,7 +15,8 @@ import torch
 from somtorch.config import AreaConfig
 from somtorch.config.objects import CONTINUITY_STEP_FRAC, CONTINUITY_STEP_PX, CONTINUOUS_SHARE
 from somtorch.tasks.baselines.plane_components import PlaneComponentsParams
-from somtorch.tasks.detect import MapContext, find_objects, linkable_segments
+from somtorch.tasks.context import MapContext
+from somtorch.tasks.detect import find_objects, linkable_segments
 from somtorch.tasks.ground import GroundPlane
 from somtorch.tasks.objects import continuous_pairs, find_object_areas, neuron_stats, pair_continuity
 
@@ -160,7 +161,7 @@ def test_a_boundary_is_continuous_when_most_of_its_pixel_pairs_are():
 
 
 def test_object_mode_names_the_link_and_ranking_used_and_why():
-    from somtorch.tasks.detect import object_mode
+    from somtorch.tasks.context import object_mode
 
     mask = torch.zeros(H, W, dtype=torch.bool)
     supported = GroundPlane(0.0, 0.1, 1.0, 0.5, mask, 0.44, support=True, rim_frac=0.77)
