@@ -5,8 +5,8 @@
 a band of it, how many are predicted above the band, and how many of those lie beneath the band —
 the counts of the ``(I, N)`` comparisons torch would materialise, without materialising them.
 It knows nothing of disparity: the ground fit (:func:`somtorch.tasks.ground.fit_ground_plane`)
-passes its hypotheses and sampled pixels, and keeps its torch path for when
-:func:`native_plane_counts` returns None.
+passes its hypotheses and sampled pixels to :func:`plane_counts`, which takes the torch definition
+(:func:`torch_plane_counts`) where the kernel cannot serve.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import torch
 
 from .native import enabled, library
 
-__all__ = ["native_plane_counts", "torch_plane_counts"]
+__all__ = ["native_plane_counts", "plane_counts", "torch_plane_counts"]
 
 
 def torch_plane_counts(coef: torch.Tensor, pts: torch.Tensor, tol: float, *, tests: bool = True
@@ -63,3 +63,11 @@ def native_plane_counts(coef: torch.Tensor, pts: torch.Tensor, tol: float, *, te
                                    None if seen is None else seen.data_ptr(),
                                    None if behind is None else behind.data_ptr())
     return (inl, seen, behind) if rc == 0 else None
+
+
+def plane_counts(coef: torch.Tensor, pts: torch.Tensor, tol: float, *, tests: bool = True
+                 ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+    """:func:`native_plane_counts` where the kernel serves the call, else :func:`torch_plane_counts`:
+    the same integers either way."""
+    got = native_plane_counts(coef, pts, tol, tests=tests)
+    return got if got is not None else torch_plane_counts(coef, pts, tol, tests=tests)

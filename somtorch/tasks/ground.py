@@ -45,7 +45,7 @@ import torch
 
 from ..config import GroundConfig
 from ..config.options import GROUND_RULES as RULES
-from ..core.plane_counts import native_plane_counts
+from ..core.plane_counts import plane_counts
 from ..validation import check_tensor
 from .support_surface import own_band, own_surface, plane_fit, surface_map
 
@@ -153,9 +153,8 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     if not bool(plausible.any()):
         return None
     # each hypothesis's residual at each sampled pixel in float32 (disparities of a few hundred px, a
-    # band of at least tol_px: far above its rounding); element-wise, so the same bits at any thread
-    # count: counted by the native kernel, or computed once for every band tried below
-    resid: torch.Tensor | None = None
+    # band of at least tol_px: far above its rounding); element-wise, so the same counts at any
+    # thread count, from the native kernel or torch (core.plane_counts)
     # the support-surface tests are constraints of the model, checked on a sample of the whole map
     # for every hypothesis: the best plane that passes them, not the best plane, is tested on the
     # full map (a single best hypothesis near a test's threshold made the verdict a lottery of the
@@ -165,13 +164,7 @@ def fit_ground_plane(disparity: torch.Tensor, valid: torch.Tensor, cfg: GroundCo
     on_rim = _sample(rim.nonzero(), disparity, cfg.sample, g)
 
     def inliers(band: float) -> torch.Tensor:
-        nonlocal resid
-        got = native_plane_counts(coef, pts, band, tests=False)
-        if got is not None:
-            return got[0].masked_fill(~plausible, -1)
-        if resid is None:
-            resid = (_predict(coef, pts) - pts[None, :, 2].float()).abs_()  # (I, N)
-        return (resid < band).sum(1).masked_fill(~plausible, -1)
+        return plane_counts(coef, pts, band, tests=False)[0].masked_fill(~plausible, -1)
 
     def best_plane(band: float, score: torch.Tensor) -> GroundPlane | None:
         """The best hypothesis by ``score`` (its inliers within ``band``) that passes the tests, verified."""
@@ -269,33 +262,16 @@ def quantum(values: torch.Tensor) -> float:
     return q if bool(((steps - steps.round()).abs() <= 1e-3).all()) else 0.0
 
 
-def _predict(coef: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:
-    """Disparity of every hypothesis ``coef`` ``(I, 3)`` at every point ``pts`` ``(N, 3)`` rows
-    (x, y, d): ``(I, N)`` float32."""
-    c = coef.float()
-    x, y = pts[None, :, 0].float(), pts[None, :, 1].float()
-    return c[:, 0:1] * x + c[:, 1:2] * y + c[:, 2:3]
-
-
 def _passes_sampled(coef: torch.Tensor, q: torch.Tensor, rim: torch.Tensor, tol: float,
                     oriented: torch.Tensor, cfg: GroundConfig) -> torch.Tensor:
     """Which hypotheses ``coef`` ``(I, 3)`` pass the tests of ``cfg.rule`` on the sample ``q``
     ``(N, 3)`` rows (x, y, d) of the whole map and ``rim`` ``(M, 3)`` of the view's rim (the
     full-map tests of :func:`_verified`, estimated).
     ``oriented`` ``(I,)``: the hypotheses that pass the position rule's orientation test."""
-    got = native_plane_counts(coef, q, tol)
-    rim_got = None if got is None else native_plane_counts(coef, rim, tol, tests=False)
-    if got is not None and rim_got is not None:  # the counts of the (I, N) comparisons below
-        n_in, n_seen, n_behind = got
-        # a mean of 0 / 1 values is their count over N in float32, the same bits
-        share, on_rim = n_in.float() / q.shape[0], rim_got[0].float() / rim.shape[0]
-    else:
-        pred = _predict(coef, q)  # (I, N)
-        d = q[None, :, 2].float()
-        share = ((pred - d).abs() < tol).float().mean(1)
-        seen = pred > tol
-        n_seen, n_behind = seen.sum(1), (seen & (d < pred - tol)).sum(1)
-        on_rim = ((_predict(coef, rim) - rim[None, :, 2].float()).abs() < tol).float().mean(1)
+    n_in, n_seen, n_behind = plane_counts(coef, q, tol)
+    # shares in float32, count / N: the bits of the mean of the (I, N) 0 / 1 comparisons
+    share = n_in.float() / q.shape[0]
+    on_rim = plane_counts(coef, rim, tol, tests=False)[0].float() / rim.shape[0]
     ok = share >= cfg.min_inlier_frac
     hides = n_behind <= cfg.max_below_frac * n_seen.clamp_min(1)  # a floor hides what lies beneath
     surrounds = (on_rim >= cfg.support_frac) & hides

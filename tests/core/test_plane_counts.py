@@ -57,3 +57,11 @@ def test_the_kernel_declines_what_it_cannot_serve(kernel, monkeypatch):
     assert native_plane_counts(torch.zeros(3, 4), torch.zeros(5, 3), 0.5) is None
     monkeypatch.setenv("SOMTORCH_NATIVE", "0")
     assert native_plane_counts(coef, torch.zeros(5, 3), 0.5) is None
+
+
+def test_a_share_as_count_over_n_is_torchs_mean_of_the_comparisons():
+    # the ground fit reads each hypothesis's share of sampled pixels as count / N in float32; the
+    # mean of the (I, N) 0 / 1 comparisons it replaced gives the same bits for every count
+    for n in (1, 3, 97, 1000, 4999, 5000):
+        m = torch.arange(n)[None, :] < torch.arange(n + 1)[:, None]  # row c: c ones
+        assert torch.equal(m.float().mean(1), m.sum(1).float() / n), n

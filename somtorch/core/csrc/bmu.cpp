@@ -878,7 +878,7 @@ int label_stats(const int64_t* lab, int64_t H, int64_t W, int64_t K, const doubl
 }
 
 // The counts the ground fit's RANSAC needs of each plane hypothesis on sampled pixels (see
-// somtorch/tasks/ground.py, _predict and _passes_sampled), as torch computes them in float32:
+// somtorch/core/plane_counts.py, torch_plane_counts), as torch computes them in float32:
 // pred = c0*x + c1*y + c2 with c the hypothesis rounded to float32 and each product and sum rounded
 // (no fused multiply-add: the library is built with -ffp-contract=off); a pixel is an inlier where
 // |pred - d| < tol, seen where pred > tol, behind where seen and d < pred - tol (tol as float32).
