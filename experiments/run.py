@@ -156,6 +156,10 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
         metrics = summarize(scene, result, config_dict)
         if result.ground is not None:
             metrics["ground_plane"] = result.ground.as_dict()
+        if cfg.output.pointcloud and cfg.output.render and cfg.output.render_backend != "matplotlib" \
+                and scene.camera is not None:  # whether Open3D renders: asked while the pictures are drawn
+            from somtorch.geometry import start_open3d_probe  # (a core each, not beside the pipeline)
+            start_open3d_probe()
         if cfg.output.maps:
             interrupt.note("while writing the pictures")
             bar.set_postfix_str("maps")

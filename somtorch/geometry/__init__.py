@@ -12,7 +12,7 @@ from somtorch.geometry.pointcloud import (
     disparity_to_point_cloud,
     intrinsics_matrix,
 )
-from somtorch.geometry.render import open3d_rendering_available, render_point_cloud
+from somtorch.geometry.render import open3d_rendering_available, render_point_cloud, start_open3d_probe
 
 __all__ = [
     "PointCloud",
@@ -21,6 +21,7 @@ __all__ = [
     "disparity_to_point_cloud",
     "intrinsics_matrix",
     "open3d_rendering_available",
+    "start_open3d_probe",
     "read_ply",
     "render_point_cloud",
     "write_ply",

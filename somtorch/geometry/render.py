@@ -15,6 +15,7 @@ Open3D, or ``=1`` to skip it and trust that Open3D works.
 
 from __future__ import annotations
 
+import atexit
 import functools
 import logging
 import math
@@ -30,7 +31,7 @@ from somtorch.geometry.ply import _atomic_output
 from somtorch.geometry.pointcloud import PointCloud
 from somtorch.validation import check_choice, check_positive, check_positive_int
 
-__all__ = ["MAX_SCATTER_POINTS", "open3d_rendering_available", "render_point_cloud"]
+__all__ = ["MAX_SCATTER_POINTS", "open3d_rendering_available", "render_point_cloud", "start_open3d_probe"]
 
 log = logging.getLogger(__name__)
 
@@ -61,28 +62,63 @@ _VIEWS = {"front": (0.0, 0.0), "oblique": (20.0, 30.0)}
 _BACKENDS = ("auto", "open3d", "matplotlib")
 
 
+_started: subprocess.Popen | None = None  # the probe started ahead by start_open3d_probe, not yet read
+
+
+def start_open3d_probe() -> None:
+    """Start :func:`open3d_rendering_available`'s probe in the background now, so that its one to
+    two seconds pass while the caller works (the main job starts it as it draws the pictures, one core
+    each, and reads it when it renders the cloud). Does nothing where the answer is known (the
+    environment variable, or this process asked before) or a probe is running already."""
+    global _started
+    if _started is not None or os.environ.get(_ENV, "").strip() in ("0", "1") \
+            or open3d_rendering_available.cache_info().currsize:
+        return
+    _started = _launch()
+    atexit.register(_stop_probe)
+
+
+def _launch() -> subprocess.Popen:
+    """The rendering probe, started in a subprocess (its output read by the caller)."""
+    return subprocess.Popen([sys.executable, "-c", _PROBE], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def _stop_probe() -> None:
+    """Kill a background probe nobody read (the process ends before it renders)."""
+    global _started
+    if _started is not None and _started.poll() is None:
+        _started.kill()
+        _started.wait()
+    _started = None
+
+
 @functools.cache
 def open3d_rendering_available() -> tuple[bool, str]:
     """Whether Open3D offscreen rendering works in this environment, and why not if it does not.
 
     Decided once per process (cached): by ``SOMTORCH_OPEN3D_RENDER`` (``0``/``1``) if set, else by
-    rendering a tiny cloud in a subprocess (about 1–2 s), which is safe even where the renderer
-    crashes the process.
+    rendering a tiny cloud in a subprocess (about 1–2 s; started ahead by :func:`start_open3d_probe`
+    where the caller did so), which is safe even where the renderer crashes the process.
 
     Returns:
         ``(available, reason)``; ``reason`` is the probe's last error line when unavailable.
     """
+    global _started
     env = os.environ.get(_ENV, "").strip()
     if env in ("0", "1"):
         return env == "1", f"set by {_ENV}={env}"
+    proc, _started = _started, None
     try:
-        proc = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True,
-                              timeout=_PROBE_TIMEOUT_S, check=False)
+        proc = proc or _launch()
+        out, err = proc.communicate(timeout=_PROBE_TIMEOUT_S)
     except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
         return False, f"the Open3D rendering probe did not finish within {_PROBE_TIMEOUT_S:.0f} s"
-    if proc.returncode == 0 and _PROBE_MARK in proc.stdout:
+    if proc.returncode == 0 and _PROBE_MARK in out:
         return True, "the Open3D rendering probe succeeded"
-    lines = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
+    lines = [ln.strip() for ln in err.splitlines() if ln.strip()]
     if proc.returncode < 0:
         why = f"the Open3D rendering probe was killed by signal {-proc.returncode}"
         why += f" (last message: {lines[-1]})" if lines else ""

@@ -12,6 +12,7 @@ from somtorch.geometry import (
     disparity_to_point_cloud,
     open3d_rendering_available,
     render_point_cloud,
+    start_open3d_probe,
 )
 from somtorch.geometry.render import MAX_SCATTER_POINTS
 
@@ -144,3 +145,30 @@ def test_grey_image_colours_are_replaced_by_depth(tmp_path):
     grey = PointCloud(cloud.points, torch.full((len(cloud), 3), 0.5))
     render_point_cloud(grey, tmp_path / "grey.png", width=200, height=150, backend="matplotlib")
     assert (np.ptp(_pixels(tmp_path / "grey.png"), axis=2) > 30).mean() > 0.01
+
+
+def test_probe_started_ahead_gives_the_same_answer(monkeypatch):
+    from somtorch.geometry import render
+
+    monkeypatch.delenv("SOMTORCH_OPEN3D_RENDER", raising=False)
+    open3d_rendering_available.cache_clear()
+    start_open3d_probe()
+    assert render._started is not None  # running in the background
+    start_open3d_probe()  # a second start while one runs: the same probe, not another
+    ahead = render._started
+    answer = open3d_rendering_available()
+    assert render._started is None and ahead.returncode is not None  # read and reaped
+    assert answer == open3d_rendering_available.__wrapped__()  # the same as a probe run on the spot
+    start_open3d_probe()  # the answer is known: nothing starts
+    assert render._started is None
+    open3d_rendering_available.cache_clear()
+    monkeypatch.setenv("SOMTORCH_OPEN3D_RENDER", "0")
+    start_open3d_probe()  # the environment decides: no probe
+    assert render._started is None
+    assert open3d_rendering_available() == (False, "set by SOMTORCH_OPEN3D_RENDER=0")
+    open3d_rendering_available.cache_clear()
+    monkeypatch.delenv("SOMTORCH_OPEN3D_RENDER")
+    start_open3d_probe()
+    unread = render._started
+    render._stop_probe()  # at exit: a probe nobody read is killed and reaped
+    assert render._started is None and unread.returncode is not None
