@@ -321,6 +321,42 @@ def test_the_noise_reading_steps_over_rows_to_at_most_half_a_million_pixels():
     assert noise_sigma(odd, ones) < 1e-4
 
 
+def test_the_noise_reading_s_medians_are_torch_s():
+    """noise_sigma takes its medians by numpy's partial sort: the same value as ``torch.median`` (the
+    lower middle of an even count), NaN where a NaN is among them, ±inf in place; the reading equals
+    its torch formulation bit for bit on maps with integers, NaN and inf."""
+    import math
+
+    import numpy as np
+
+    from somtorch.tasks.ground import _median, noise_sigma
+
+    def torch_sigma(d, v):
+        sigma = 0.0
+        for lag in (1, 2):
+            both = v[:, :-lag] & v[:, lag:]
+            diff = (d[:, lag:] - d[:, :-lag])[both].double()
+            if diff.numel() >= 10:
+                mad = (diff - diff.median()).abs().median()
+                sigma = max(sigma, float(1.4826 * mad / math.sqrt(2.0)))
+        return sigma
+
+    inf, nan = float("inf"), float("nan")
+    for x in ([3.0, 1.0, 2.0, 4.0], [5.0], [2.0, 2.0, 1.0], [1.0, nan, 0.0], [inf, 1.0, -2.0],
+              [-inf, inf, 0.0, 1.0]):
+        a, b = _median(np.array(x)), float(torch.tensor(x, dtype=torch.float64).median())
+        assert a == b or (math.isnan(a) and math.isnan(b)), x
+    g = torch.Generator().manual_seed(5)
+    for i in range(60):
+        h, w = int(torch.randint(2, 50, (1,), generator=g)), int(torch.randint(3, 70, (1,), generator=g))
+        d = (torch.randn(h, w, generator=g) * 3).float()
+        d = d.round() if i % 3 == 0 else d
+        d[torch.rand(h, w, generator=g) < (0.05 if i % 4 == 0 else 0.0)] = float("inf" if i % 8 else "nan")
+        v = torch.rand(h, w, generator=g) < 0.8
+        a, b = noise_sigma(d, v), torch_sigma(d, v)
+        assert a == b or (math.isnan(a) and math.isnan(b)), i
+
+
 def test_the_noise_is_measured_once_whether_the_map_is_filtered_or_not(monkeypatch):
     """The median's trigger and the ground band read the same σ, measured once: on a map read as
     given the band takes it as measured; on a noisy one, filtered, what the median leaves of it

@@ -55,7 +55,7 @@ ENV_SWITCH = "SOMTORCH_NATIVE"  # "0" disables the native kernel
 ENV_CACHE = "SOMTORCH_CACHE_DIR"
 ENV_WIDE = "SOMTORCH_NATIVE_AVX512"  # "0": AVX2 vectors even where the CPU has AVX-512
 SOURCE = Path(__file__).resolve().parent / "csrc" / "bmu.cpp"
-ABI = 6  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
+ABI = 7  # must equal somtorch_bmu_abi() in csrc/bmu.cpp
 BASE_FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-ffp-contract=off")
 BUILD_TIMEOUT_S = 300
 
@@ -190,6 +190,8 @@ def _load() -> ctypes.CDLL:
     lib.somtorch_label_stats.restype = ctypes.c_int
     lib.somtorch_plane_counts.argtypes = [p, i64, p, p, p, i64, ctypes.c_float, p, p, p]
     lib.somtorch_plane_counts.restype = ctypes.c_int
+    lib.somtorch_plane_band.argtypes = [p, p, p, i64, i64, ctypes.c_double, p, p, ctypes.c_int]
+    lib.somtorch_plane_band.restype = ctypes.c_int
     return lib
 
 

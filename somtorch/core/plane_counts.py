@@ -3,10 +3,13 @@
 ``z = a·x + b·y + c`` and each point ``(x, y, z)``, the float32 prediction as torch computes it
 (the hypothesis rounded to float32, each product and sum rounded), and how many points lie within
 a band of it, how many are predicted above the band, and how many of those lie beneath the band —
-the counts of the ``(I, N)`` comparisons torch would materialise, without materialising them.
+the counts of the ``(I, N)`` comparisons torch would materialise, without materialising them;
+and one plane's band over a whole map (``somtorch_plane_band``, :func:`plane_band`): the pixels
+within it and the same counts, in float64, in one pass instead of a dozen ``(H, W)`` tensors.
 It knows nothing of disparity: the ground fit (:func:`somtorch.tasks.ground.fit_ground_plane`)
-passes its hypotheses and sampled pixels to :func:`plane_counts`, which takes the torch definition
-(:func:`torch_plane_counts`) where the kernel cannot serve.
+passes its hypotheses and sampled pixels to :func:`plane_counts` and the plane it verifies to
+:func:`plane_band`, which take their torch definitions (:func:`torch_plane_counts`,
+:func:`torch_plane_band`) where the kernel cannot serve.
 """
 
 from __future__ import annotations
@@ -15,7 +18,8 @@ import torch
 
 from .native import enabled, library
 
-__all__ = ["native_plane_counts", "plane_counts", "torch_plane_counts"]
+__all__ = ["native_plane_band", "native_plane_counts", "plane_band", "plane_counts", "torch_plane_band",
+           "torch_plane_counts"]
 
 
 def torch_plane_counts(coef: torch.Tensor, pts: torch.Tensor, tol: float, *, tests: bool = True
@@ -71,3 +75,58 @@ def plane_counts(coef: torch.Tensor, pts: torch.Tensor, tol: float, *, tests: bo
     the same integers either way."""
     got = native_plane_counts(coef, pts, tol, tests=tests)
     return got if got is not None else torch_plane_counts(coef, pts, tol, tests=tests)
+
+
+def torch_plane_band(coef: tuple[float, float, float], z: torch.Tensor, ok: torch.Tensor, tol: float
+                     ) -> tuple[torch.Tensor, int, int, int]:
+    """The definition :func:`native_plane_band` reproduces, in torch: for the plane
+    ``p = a·x + b·y + c`` (``coef``; x the column, y the row) over the map ``z``, in float64,
+    ``(band, inliers, seen, behind)``: the ``(H, W)`` bool mask ``ok & (|p − z| < tol)`` and its
+    count, the count of ``ok & (p > tol)``, and of those the pixels with ``z < p − tol``."""
+    h, w = z.shape
+    ys = torch.arange(h, dtype=torch.float64)[:, None]
+    xs = torch.arange(w, dtype=torch.float64)[None, :]
+    cf = torch.tensor(coef, dtype=torch.float64)
+    p = cf[0] * xs + cf[1] * ys + cf[2]
+    d = z.double()
+    band = ok & ((p - d).abs() < tol)
+    seen = ok & (p > tol)
+    return band, int(band.sum()), int(seen.sum()), int((seen & (d < p - tol)).sum())
+
+
+@torch.no_grad()
+def native_plane_band(coef: tuple[float, float, float], z: torch.Tensor, ok: torch.Tensor, tol: float
+                      ) -> tuple[torch.Tensor, int, int, int] | None:
+    """:func:`torch_plane_band` in one native pass over the map (rows split over torch's threads;
+    the same mask and integers), or None where the kernel cannot serve the call
+    (``SOMTORCH_NATIVE=0``, no library, tensors off the CPU or not a float32 map and a bool mask of
+    one ``(H, W)`` shape).
+
+    Shape:
+        ``z``, ``ok`` ``(H, W)``.
+    """
+    if not enabled() or z.device.type != "cpu" or ok.device.type != "cpu" or z.ndim != 2 \
+            or z.dtype != torch.float32 or ok.dtype != torch.bool or ok.shape != z.shape:
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    h, w = z.shape
+    cf = torch.tensor([float(v) for v in coef[:3]], dtype=torch.float64)
+    zc, okc = z.contiguous(), ok.contiguous()
+    band = torch.empty(h, w, dtype=torch.bool)
+    counts = torch.zeros(3, dtype=torch.long)
+    rc = lib.somtorch_plane_band(cf.data_ptr(), zc.data_ptr(), okc.data_ptr(), h, w, float(tol),
+                                 band.data_ptr(), counts.data_ptr(), torch.get_num_threads())
+    if rc != 0:
+        return None
+    n_in, n_seen, n_behind = counts.tolist()
+    return band, n_in, n_seen, n_behind
+
+
+def plane_band(coef: tuple[float, float, float], z: torch.Tensor, ok: torch.Tensor, tol: float
+               ) -> tuple[torch.Tensor, int, int, int]:
+    """:func:`native_plane_band` where the kernel serves the call, else :func:`torch_plane_band`:
+    the same mask and integers either way."""
+    got = native_plane_band(coef, z, ok, tol)
+    return got if got is not None else torch_plane_band(coef, z, ok, tol)

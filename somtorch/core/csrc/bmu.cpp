@@ -14,7 +14,8 @@
 // Also: somtorch_label_stats, the object step's one pass over a label map (counts, sums, boxes and
 // the adjacency of 4-connected pixel pairs; see somtorch/core/label_stats.py), and
 // somtorch_plane_counts, the ground fit's counts of each plane hypothesis over sampled pixels
-// (inliers, in view, behind; see somtorch/core/plane_counts.py).
+// (inliers, in view, behind; see somtorch/core/plane_counts.py), and somtorch_plane_band, one
+// plane's band and those counts over a whole map.
 //
 // Plain C ABI (called through ctypes); no torch headers, so it builds in about a second.
 // OpenMP comes from the libgomp that torch has already loaded (same soname), so it shares
@@ -912,12 +913,53 @@ int plane_counts(const double* coef, int64_t I, const float* xs, const float* ys
   return 0;
 }
 
+// A plane's band over a whole map (see somtorch/core/plane_counts.py, torch_plane_band), as torch
+// computes it in float64: plane = (a*x + b*y) + c at pixel (x, y), each product and sum rounded;
+// z widened to float64. Where ok: in the band where |plane - z| < tol (mask[p] = 1, counted), seen
+// where plane > tol, behind where seen and z < plane - tol. Rows are independent (OpenMP), and the
+// counts are integers: the same result at any thread count.
+int plane_band(const double* coef, const float* z, const uint8_t* ok, int64_t H, int64_t W, double tol,
+               uint8_t* mask, int64_t* counts, int nthreads) {
+  if (H < 0 || W < 0) return 1;
+  const double a = coef[0], b = coef[1], c = coef[2];
+  std::vector<double> ax((size_t)W);
+  for (int64_t x = 0; x < W; ++x) ax[(size_t)x] = a * (double)x;
+  int64_t n_in = 0, n_seen = 0, n_behind = 0;
+#pragma omp parallel for num_threads(nthreads > 0 ? nthreads : 1) reduction(+ : n_in, n_seen, n_behind) \
+    schedule(static)
+  for (int64_t y = 0; y < H; ++y) {
+    const double by = b * (double)y;
+    const float* zr = z + y * W;
+    const uint8_t* okr = ok + y * W;
+    uint8_t* mr = mask + y * W;
+    int64_t r_in = 0, r_seen = 0, r_behind = 0;
+    for (int64_t x = 0; x < W; ++x) {  // branch-free, so that it vectorises
+      const double plane = (ax[(size_t)x] + by) + c;
+      const double d = (double)zr[x];
+      const uint8_t v = okr[x] != 0;
+      const uint8_t in = v & (std::fabs(plane - d) < tol);
+      const uint8_t sn = v & (plane > tol);
+      mr[x] = in;
+      r_in += in;
+      r_seen += sn;
+      r_behind += sn & (d < plane - tol);
+    }
+    n_in += r_in;
+    n_seen += r_seen;
+    n_behind += r_behind;
+  }
+  counts[0] = n_in;
+  counts[1] = n_seen;
+  counts[2] = n_behind;
+  return 0;
+}
+
 }  // namespace
 
 extern "C" {
 
 // Version of this C ABI; native.py refuses a library that reports another one.
-int somtorch_bmu_abi(void) { return 6; }
+int somtorch_bmu_abi(void) { return 7; }
 
 int somtorch_bmu_f32(const float* x, int64_t x_stride, const float* w, int64_t E, int64_t N,
                      int64_t K, int64_t D, int top, int64_t* out, int nthreads) {
@@ -980,6 +1022,11 @@ int somtorch_label_stats(const int64_t* lab, int64_t H, int64_t W, int64_t K, co
 int somtorch_plane_counts(const double* coef, int64_t I, const float* xs, const float* ys, const float* ds,
                           int64_t N, float tol, int64_t* inl, int64_t* seen, int64_t* behind) {
   return plane_counts(coef, I, xs, ys, ds, N, tol, inl, seen, behind);
+}
+
+int somtorch_plane_band(const double* coef, const float* z, const uint8_t* ok, int64_t H, int64_t W,
+                        double tol, uint8_t* mask, int64_t* counts, int nthreads) {
+  return plane_band(coef, z, ok, H, W, tol, mask, counts, nthreads);
 }
 
 }  // extern "C"
