@@ -74,6 +74,10 @@ def valid_integral(valid: torch.Tensor) -> torch.Tensor:
     int32 while the map has fewer than 2³¹ pixels (half the memory traffic of int64), int64 above.
     """
     dt = torch.int32 if valid.numel() < 2 ** 31 else torch.long
+    if dt == torch.int32 and valid.device.type == "cpu" and valid.dtype == torch.bool and valid.numel():
+        import cv2  # the same int32 sums (zero first row and column), 5-10x faster than two cumsums
+
+        return torch.from_numpy(cv2.integral(valid.contiguous().numpy().view("uint8")))
     ii = torch.zeros(valid.shape[0] + 1, valid.shape[1] + 1, dtype=dt, device=valid.device)
     ii[1:, 1:] = valid.to(dt).cumsum(0, dtype=dt).cumsum(1, dtype=dt)
     return ii

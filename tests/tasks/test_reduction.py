@@ -136,3 +136,20 @@ def test_a_precomputed_integral_gives_the_same_reduction_and_must_fit_the_mask()
         (plain.boxes, plain.kept_union, plain.kept_crops, plain.crops_valid)
     with pytest.raises(ValueError, match="integral has shape"):
         reduce_map(boxes, valid, integral=valid_integral(valid[:, :-1]), tolerance_image=0.0)
+
+
+def test_the_integral_image_is_the_cumulative_sums_of_the_mask():
+    """valid_integral (OpenCV's integral on the CPU) holds the same int32 sums as the two cumulative
+    sums that define it: on random masks, views of them, empty, full and one-pixel masks."""
+    from somtorch.tasks.reduction import valid_integral
+
+    g = torch.Generator().manual_seed(4)
+    masks = [torch.rand(h, w, generator=g) < p for h, w, p in ((1, 1, 0.5), (3, 200, 0.3), (97, 131, 0.9),
+                                                                 (240, 320, 0.5))]
+    masks += [masks[-1][::3, 1::2], masks[-1].T, torch.zeros(5, 7, dtype=torch.bool),
+              torch.ones(6, 4, dtype=torch.bool), torch.zeros(0, 3, dtype=torch.bool)]
+    for m in masks:
+        want = torch.zeros(m.shape[0] + 1, m.shape[1] + 1, dtype=torch.int32)
+        want[1:, 1:] = m.to(torch.int32).cumsum(0, dtype=torch.int32).cumsum(1, dtype=torch.int32)
+        got = valid_integral(m)
+        assert got.dtype == torch.int32 and torch.equal(got, want), tuple(m.shape)
