@@ -342,11 +342,15 @@ def test_the_noise_reading_s_medians_are_torch_s():
         return sigma
 
     inf, nan = float("inf"), float("nan")
-    for x in ([3.0, 1.0, 2.0, 4.0], [5.0], [2.0, 2.0, 1.0], [1.0, nan, 0.0], [inf, 1.0, -2.0],
-              [-inf, inf, 0.0, 1.0]):
-        a, b = _median(np.array(x)), float(torch.tensor(x, dtype=torch.float64).median())
-        assert a == b or (math.isnan(a) and math.isnan(b)), x
     g = torch.Generator().manual_seed(5)
+    # zeros below, at and above the middle (the partial sort skips them), none, all
+    mixed = [(torch.randint(-3, 4, (n,), generator=g) * torch.rand(n, generator=g).round()).tolist()
+             for n in (1, 2, 9, 10, 101, 1000)]
+    for x in ([3.0, 1.0, 2.0, 4.0], [5.0], [2.0, 2.0, 1.0], [1.0, nan, 0.0], [inf, 1.0, -2.0],
+              [-inf, inf, 0.0, 1.0], [0.0, 0.0, 0.0, -1.0, 5.0], [-3.0, -2.0, -1.0, 0.0],
+              [0.0, 0.0, 1.0, 2.0, 3.0], [0.0] * 6, [-1.0, -1.0, 0.0, 2.0], *mixed):
+        a, b = _median(np.array(x, dtype=np.float64)), float(torch.tensor(x, dtype=torch.float64).median())
+        assert a == b or (math.isnan(a) and math.isnan(b)), x
     for i in range(60):
         h, w = int(torch.randint(2, 50, (1,), generator=g)), int(torch.randint(3, 70, (1,), generator=g))
         d = (torch.randn(h, w, generator=g) * 3).float()

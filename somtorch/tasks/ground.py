@@ -252,12 +252,23 @@ def noise_sigma(disparity: torch.Tensor, valid: torch.Tensor) -> float:
 
 def _median(x: np.ndarray) -> float:
     """torch's median of a 1-D float64 array: the lower of the two middle values where their number
-    is even, NaN where there is one; by a partial sort (numpy's introselect), 3–4× faster than
-    ``torch.median`` on the half a million differences :func:`noise_sigma` reads."""
+    is even, NaN where there is one; by numpy's partial sort, 2–4× faster than ``torch.median`` on
+    the half a million differences :func:`noise_sigma` reads. Partial sorting slows down on many
+    equal values, and a map's neighbour differences are mostly exact zeros (a flat or stored-in-steps
+    surface), so the zeros are counted and only the values on the median's side of them sorted."""
     if not np.isfinite(x).all():
         return float(torch.from_numpy(x).median())  # NaN propagates as torch has it; ±inf sorted alike
     k = (x.size - 1) // 2
-    return float(np.partition(x, k)[k])
+    below = x < 0
+    n_below = int(np.count_nonzero(below))
+    if k < n_below:
+        part = x[below]
+    else:
+        n_zero = int(np.count_nonzero(x == 0))
+        if k < n_below + n_zero:
+            return 0.0  # (a zero's sign reaches no reading: it is subtracted, then taken absolute)
+        part, k = x[x > 0], k - n_below - n_zero
+    return float(np.partition(part, k)[k])
 
 
 def quantum(values: torch.Tensor) -> float:
