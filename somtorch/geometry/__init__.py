@@ -21,8 +21,8 @@ __all__ = [
     "disparity_to_point_cloud",
     "intrinsics_matrix",
     "open3d_rendering_available",
-    "start_open3d_probe",
     "read_ply",
     "render_point_cloud",
+    "start_open3d_probe",
     "write_ply",
 ]
