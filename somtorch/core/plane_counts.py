@@ -18,8 +18,8 @@ import torch
 
 from .native import enabled, library
 
-__all__ = ["native_plane_band", "native_plane_counts", "plane_band", "plane_counts", "torch_plane_band",
-           "torch_plane_counts"]
+__all__ = ["native_plane_band", "native_plane_counts", "plane_band", "plane_counts", "surface_band",
+           "torch_plane_band", "torch_plane_counts"]
 
 
 def torch_plane_counts(coef: torch.Tensor, pts: torch.Tensor, tol: float, *, tests: bool = True
@@ -87,11 +87,17 @@ def torch_plane_band(coef: tuple[float, float, float], z: torch.Tensor, ok: torc
     ys = torch.arange(h, dtype=torch.float64)[:, None]
     xs = torch.arange(w, dtype=torch.float64)[None, :]
     cf = torch.tensor(coef, dtype=torch.float64)
-    p = cf[0] * xs + cf[1] * ys + cf[2]
+    return surface_band(cf[0] * xs + cf[1] * ys + cf[2], z, ok, tol)
+
+
+def surface_band(surface: torch.Tensor, z: torch.Tensor, ok: torch.Tensor, tol: float
+                 ) -> tuple[torch.Tensor, int, int, int]:
+    """:func:`torch_plane_band` for any surface given at every pixel (``surface`` ``(H, W)``
+    float64: a plane, or a bent one), the map ``z`` widened to float64."""
     d = z.double()
-    band = ok & ((p - d).abs() < tol)
-    seen = ok & (p > tol)
-    return band, int(band.sum()), int(seen.sum()), int((seen & (d < p - tol)).sum())
+    band = ok & ((surface - d).abs() < tol)
+    seen = ok & (surface > tol)
+    return band, int(band.sum()), int(seen.sum()), int((seen & (d < surface - tol)).sum())
 
 
 @torch.no_grad()

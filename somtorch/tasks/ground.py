@@ -46,7 +46,7 @@ import torch
 
 from ..config import GroundConfig
 from ..config.options import GROUND_RULES as RULES
-from ..core.plane_counts import plane_band, plane_counts
+from ..core.plane_counts import plane_band, plane_counts, surface_band
 from ..validation import check_tensor
 from .support_surface import own_band, own_surface, plane_fit, surface_map
 
@@ -356,13 +356,10 @@ def verify_plane(coef: tuple[float, ...], disparity: torch.Tensor, ok: torch.Ten
     position = b >= min_b and abs(a) <= b * w / h
     if cfg.rule == "position" and not position:
         return None
+    # its band, and where it is in view and what lies behind it (a plane: in one native pass)
     if any(bend):  # a bent support surface
-        plane = surface_map((a, b, c, *bend), h, w)
-        d = disparity.double()
-        mask = ok & ((plane - d).abs() < tol)
-        seen = ok & (plane > tol)  # where the surface is in view, and the share of it behind it
-        n_in, n_seen, n_behind = int(mask.sum()), int(seen.sum()), int((seen & (d < plane - tol)).sum())
-    else:  # a plane: its band, and where it is in view and what lies behind it, in one pass
+        mask, n_in, n_seen, n_behind = surface_band(surface_map((a, b, c, *bend), h, w), disparity, ok, tol)
+    else:
         mask, n_in, n_seen, n_behind = plane_band((a, b, c), disparity, ok, tol)
     frac = n_in / n_valid
     if frac < cfg.min_inlier_frac:
