@@ -108,7 +108,7 @@ def _load(spec: Any, data_dir: Path) -> Any:
 
 
 JUNK_KINDS = ("border", "specks", "pole", "flip", "resample:F", "noise:S", "quantize:Q", "scale:F", "bowl:P",
-              "blotch:S", "smear:S", "relief:F", "wide:F", "offset:T", "sgbm:NAME")
+              "blotch:S", "smear:S", "relief:F", "wide:F", "offset:T", "shift:N", "sgbm:NAME")
 #: ``sgbm:NAME``: the frame's stereo pair matched again with the corpus's SGBM setting
 #: (:class:`~somtorch.disparity.stereo.SGBMParams`, its number of disparities) changed by these
 #: fields — what another camera's matcher may be set to (:func:`rematched`).
@@ -151,6 +151,10 @@ def check_junk_kind(kind: str) -> None:
             if ok:
                 return
             raise ValueError(f"junk kind {kind!r}: {prefix[:-1]} needs {what}, e.g. {example}")
+    if kind.startswith("shift:"):
+        if kind[6:].isdigit() and int(kind[6:]) > 0:
+            return
+        raise ValueError(f"junk kind {kind!r}: shift needs a positive whole number of px, e.g. shift:5")
     if kind.startswith("sgbm:"):
         if kind[5:] in SGBM_VARIANTS:
             return
@@ -285,6 +289,17 @@ def add_junk(scene: Any, kind: str, *, seed: int = 0) -> Any:
         keep = scene.valid & (rounded > 0)  # a disparity rounded to 0 is no measurement
         return dataclasses.replace(scene, disparity=torch.where(keep, rounded, scene.disparity), valid=keep,
                                    name=f"{scene.name}+{kind}")
+    if kind.startswith("shift:"):  # the same view on a pixel grid N px further right and down: the first
+        # N rows and columns cut, so that every strided step (the OR sample, the object step's grid)
+        # reads other pixels of the scene (camera shifted, objects cut alike)
+        from somtorch.tiles import crop_scene
+
+        n = int(kind.split(":", 1)[1])
+        h, w = scene.disparity.shape
+        if n >= min(h, w) // 2:
+            raise ValueError(f"junk kind {kind!r}: shifts the {w}x{h} scene {scene.name!r} by half its "
+                             "shorter side or more")
+        return dataclasses.replace(crop_scene(scene, n, h, n, w), name=f"{scene.name}+{kind}")
     if kind == "flip":  # the mirrored scene (a mirrored world is a valid world; the camera is dropped)
         flip = {f: getattr(scene, f).flip(-1) for f in ("disparity", "valid", "image", "objects")
                 if getattr(scene, f) is not None}

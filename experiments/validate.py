@@ -71,7 +71,7 @@ class ValidateConfig(RunConfig):
         ni_margin: non-inferiority margin of a removal (and of the all-objects reading).
         transforms: robustness checks: every frame transformed (``flip``, ``resample:F``, ``noise:S``,
             ``quantize:Q``, ``scale:F``, ``bowl:P``, ``blotch:S``, ``smear:S``, ``relief:F``, ``wide:F``,
-            ``pole``, ``border``, ``specks``;
+            ``shift:N``, ``pole``, ``border``, ``specks``;
             experiments.scenes.add_junk) and scored with the defaults.
         baselines: task baselines (somtorch.tasks.baselines) scored beside the defaults, one run per frame.
         fresh_seeds: also score the defaults, and the in-sample choice where one is adopted, on the

@@ -571,6 +571,39 @@ def test_wide_junk_shrinks_the_view_into_its_centre_and_continues_the_floor_arou
             add_junk(scene, bad)
 
 
+def test_shift_junk_cuts_the_first_rows_and_columns_so_the_strided_steps_read_other_pixels():
+    import torch
+
+    import dataclasses
+
+    from experiments.scenes import add_junk
+    from somtorch.config import FeatureConfig
+    from somtorch.disparity.camera import Camera
+    from somtorch.disparity.scene import scene_from_arrays
+
+    scene = dataclasses.replace(_toy_scene(), camera=Camera(focal_px=100.0, cx=50.0, cy=40.0, baseline=0.1))
+    out = add_junk(scene, "shift:3")
+    h, w = scene.disparity.shape
+    assert out.disparity.shape == out.valid.shape == out.objects.shape == (h - 3, w - 3)
+    assert out.image.shape == (3, h - 3, w - 3) and out.name == "toy+shift:3"
+    assert torch.equal(out.disparity, scene.disparity[3:, 3:])
+    assert torch.equal(out.objects, scene.objects[3:, 3:])
+    assert (out.camera.cx, out.camera.cy) == (47.0, 37.0)  # the same rays: the principal point moves too
+    # at the reference size the OR sample of the shifted map is the original's grid at phase (3, 3)
+    noise = torch.rand(480, 640, generator=torch.Generator().manual_seed(0))
+    big = scene_from_arrays(noise + 1.0, name="big")
+    moved = add_junk(big, "shift:3")
+    s = FeatureConfig().stride_at(FeatureConfig().train_stride, *moved.valid.shape)
+    assert s == FeatureConfig().stride_at(FeatureConfig().train_stride, 480, 640) == 10
+    assert torch.equal(moved.disparity[::s, ::s], big.disparity[3::s, 3::s])
+    assert not torch.equal(moved.disparity[::s, ::s], big.disparity[:-3:s, :-3:s])
+    for bad in ("shift:0", "shift:2.5", "shift:x"):
+        with pytest.raises(ValueError, match="positive whole number"):
+            add_junk(scene, bad)
+    with pytest.raises(ValueError, match="half its shorter side"):
+        add_junk(scene, f"shift:{min(h, w) // 2}")
+
+
 def test_scale_junk_multiplies_every_valid_disparity_as_another_rig_would():
     import torch
 
@@ -608,7 +641,7 @@ def test_an_unknown_transform_fails_before_any_work(tmp_path):
     from experiments.scenes import check_junk_kind
 
     for ok in ("flip", "pole", "resample:0.5", "noise:0.5", "bowl:0.01", "blotch:0.5", "smear:2", "relief:0.5",
-               "wide:0.5", "offset:20", "sgbm:raw", "sgbm:tutorial"):
+               "wide:0.5", "offset:20", "shift:5", "sgbm:raw", "sgbm:tutorial"):
         check_junk_kind(ok)
     for bad, msg in (("rotate", "unknown junk kind"), ("resample:-2", "positive factor"),
                      ("resample:x", "positive factor"), ("noise:0", "positive standard deviation"),
