@@ -37,6 +37,11 @@ class SceneCache:
             self._scene = self._loader()
         return self._scene
 
+    def source(self) -> Any:
+        """What a worker process reads the frame from: the cache's loader (a picklable callable, such
+        as ``partial(load_frame, spec, data_dir)``), or the scene itself where it has none."""
+        return self._loader if self._loader is not None else self.scene
+
     def fresh_scene(self) -> Any:
         """The frame's scene, loaded again (and not kept) where this cache does not hold it."""
         return self._scene if self._scene is not None else self._loader()
@@ -128,15 +133,15 @@ class SceneCache:
 
 
 def _score_frame(job: tuple) -> dict[str, dict[str, Any]]:
-    """A worker's job: every candidate of ``keys`` (``[(overrides, saliency)]``) on one frame
-    (``ceilings``: :attr:`SceneCache.ceilings`)."""
-    spec, base, keys, data_dir, threads, ceilings = job
+    """A worker's job: every candidate of ``keys`` (``[(overrides, saliency)]``) on one frame, read
+    from ``source`` (:meth:`SceneCache.source`: the same loader the parent's cache would call, so a
+    frame loaded transformed — the fresh pass's shifted grid — is scored transformed in a worker
+    too); ``ceilings``: :attr:`SceneCache.ceilings`."""
+    spec, base, keys, source, threads, ceilings = job
     import torch
 
     torch.set_num_threads(threads)
-    from .datasets import load_frame
-
-    cache = SceneCache(spec, load_frame(spec, data_dir), base, ceilings=ceilings)
+    cache = SceneCache(spec, source() if callable(source) else source, base, ceilings=ceilings)
     for ov, sal in keys:
         cache.score(ov, saliency=sal)
     return cache.scores

@@ -217,9 +217,12 @@ def _fresh_markdown(report: dict[str, Any]) -> list[str]:
     head = "| dataset | " + " | ".join(f"{lab} useful | **fresh seeds** | {lab} all-obj | **fresh seeds**"
                                        for _, lab in parts) + " |"
     a, b = fresh["seeds"]
-    out = ["", f"On fresh seeds: the same frames scored again on seeds {a}–{b}, "
-           f"runs nothing was chosen on (the protocol chose on seeds {s0}–{s0 + n - 1}, and the rules were "
-           "designed looking at those runs too), % of runs:", "", head,
+    shift = fresh.get("shift", 0)
+    grid = (f", each frame on a pixel grid shifted by {shift} px (`shift:{shift}`: the strided steps read "
+            "other pixels of the same scene)" if shift else "")
+    out = ["", f"On fresh seeds: the same frames scored again on seeds {a}–{b}{grid}, "
+           f"runs nothing was chosen on (the protocol chose on seeds {s0}–{s0 + n - 1} of the frames as "
+           "given, and the rules were designed looking at those runs too), % of runs:", "", head,
            "|---|" + "---|---|---|---|" * len(parts)]
 
     def cells(chosen: dict[str, Any], new: dict[str, Any]) -> str:

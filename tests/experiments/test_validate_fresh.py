@@ -10,9 +10,10 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+import torch
 
 from experiments.datasets import frames, load_frame
-from experiments.validate import ValidateConfig, score_fresh_seeds
+from experiments.validate import ValidateConfig, evaluate, fresh_frame, score_fresh_seeds
 from experiments.validate_cache import SceneCache
 from experiments.validate_report import _fresh_markdown
 
@@ -31,11 +32,17 @@ def test_fresh_seeds_score_the_next_seeds_and_decide_the_choice_there(shared_dat
     choice = {"objects.merge": 0.0}
     got = score_fresh_seeds(specs, cfg, {"objects.merge": [0.0]}, {"objects.merge": 0.75}, choice,
                             Path(shared_data))
-    assert got["seeds"] == [5, 6] and got["choice"] == choice
-    # the rates are those of the seeds after the chosen-on ones, computed directly
+    assert got["seeds"] == [5, 6] and got["choice"] == choice and got["shift"] == cfg.fresh_shift == 5
+    # the rates are those of the seeds after the chosen-on ones, on the frames shifted by 5 px, computed
+    # directly
     fresh_base = replace(cfg, seed=5)
     for spec in specs:
-        cache = SceneCache(spec, load_frame(spec, shared_data), fresh_base, ceilings=False)
+        given = load_frame(spec, shared_data)
+        scene = fresh_frame(spec, Path(shared_data), 5)
+        assert scene.disparity.shape == (given.height - 5, given.width - 5)
+        assert torch.equal(scene.disparity, given.disparity[5:, 5:])
+        assert fresh_frame(spec, Path(shared_data), 0).disparity.shape == given.disparity.shape
+        cache = SceneCache(spec, scene, fresh_base, ceilings=False)
         for part, ov in (("default", {}), ("in_sample", choice)):
             s = cache.score(ov)
             assert s["runs"] == 2 and [m.seed for m in cache.members(ov)[1]] == [5, 6]
@@ -54,7 +61,8 @@ def test_fresh_seeds_score_the_next_seeds_and_decide_the_choice_there(shared_dat
               "summary": {"datasets": {d: dict(v) for d, v in got["datasets"].items()},
                           "macro_real": dict(got["macro_real"]), "macro_all": dict(got["macro_all"])}}
     md = "\n".join(_fresh_markdown(report))
-    assert "seeds 5–6" in md and "chose on seeds 3–4" in md
+    assert "seeds 5–6, each frame on a pixel grid shifted by 5 px (`shift:5`" in md
+    assert "chose on seeds 3–4" in md
     assert ("| dataset | default useful | **fresh seeds** | default all-obj | **fresh seeds** | "
             "in-sample useful |") in md
     assert ("**confirmed**" if got["confirmed"] else "**not confirmed**") in md
@@ -99,7 +107,7 @@ def test_validate_command_reads_the_fresh_seeds_and_skips_them_when_asked(shared
             "baselines=[]"]
     runs = {}
     for name, extra in (("on", []), ("off", ["fresh_seeds=false"]),
-                        ("seed2", ["seed=2", "fresh_seeds=false"])):
+                        ("seed2", ["seed=2", "fresh_seeds=false", 'transforms=["shift:5"]'])):
         proc = subprocess.run(args + [f"hydra.run.dir={tmp_path / name}"] + extra, cwd=ROOT,
                               capture_output=True, text=True, timeout=600)
         assert proc.returncode == 0, proc.stderr[-2000:]
@@ -107,13 +115,15 @@ def test_validate_command_reads_the_fresh_seeds_and_skips_them_when_asked(shared
     rep, log_text = runs["on"]
     fresh = rep["fresh_seeds"]
     assert fresh["seeds"] == [2, 3] and fresh["confirmed"] is None  # no choice adopted on no grid
-    # the fresh seeds' figures are what a run on those seeds reads as its defaults
-    other = runs["seed2"][0]["summary"]
-    for d, r in fresh["datasets"].items():
-        assert r["default_useful_hits"] == pytest.approx(other["datasets"][d]["default_useful_hits"])
-    macro = other["macro_real"]["default_useful_hits"]
-    assert fresh["macro_real"]["default_useful_hits"] == pytest.approx(macro)
-    want = (f"on fresh seeds (2-3): real macro useful-hit rate of the defaults "
+    # the fresh pass's figures are what a run on those seeds reads on the frames shifted by 5 px (one
+    # frame per dataset: the dataset's rate is its frame's)
+    shifted = runs["seed2"][0]["robustness"]["shift:5"]
+    dataset = {f.name: f.dataset for f in frames(names=FRAMES)}
+    assert fresh["shift"] == 5 and set(shifted) == set(FRAMES)
+    for name, sc in shifted.items():
+        want = sc["useful_hits"] / sc["runs"]
+        assert fresh["datasets"][dataset[name]]["default_useful_hits"] == pytest.approx(want)
+    want = (f"on fresh seeds (2-3, grid shifted 5 px): real macro useful-hit rate of the defaults "
             f"{100 * fresh['macro_real']['default_useful_hits']:.1f} % "
             f"({100 * rep['summary']['macro_real']['default_useful_hits']:.1f} % on the seeds chosen on)")
     assert want in log_text + "".join(p.read_text() for p in (tmp_path / "on").glob("*.log"))
@@ -122,3 +132,9 @@ def test_validate_command_reads_the_fresh_seeds_and_skips_them_when_asked(shared
     assert off["fresh_seeds"] is None
     assert "On fresh seeds" not in (tmp_path / "off" / "validate.md").read_text()
     assert off["summary"] == rep["summary"]  # the fresh pass changes nothing of the main tables
+
+
+def test_a_negative_fresh_shift_fails_before_any_work():
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ValueError, match="fresh_shift=.*whole number of px, 0 or more"):
+            evaluate(_cfg(fresh_shift=bad))
