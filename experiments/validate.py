@@ -154,7 +154,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
             yield scene, base, upstream
             yield scene, base, len(keys)
             if cfg.fresh_seeds:  # the defaults once more on the next seeds (score_fresh_seeds)
-                yield scene, base, 1
+                yield _fresh_checked(scene, spec, cfg.fresh_shift), base, 1
 
     what = f"{len(specs)} frames x {len(keys)} candidates"
     est = check_resources(jobs(), cfg.resources, f"validation over {what}")
@@ -311,6 +311,24 @@ def fresh_frame(spec: Any, data_dir: Path, shift: int) -> Any:
 
     scene = load_frame(spec, data_dir)
     return add_junk(scene, f"shift:{shift}") if shift else scene
+
+
+def _fresh_checked(scene: Any, spec: Any, shift: int) -> Any:
+    """``scene`` as the fresh pass will read it, checked before any work: the shift must leave the
+    frame and a valid pixel of its main object (``ValueError`` naming the frame)."""
+    if not shift:
+        return scene
+    from .scenes import add_junk
+
+    try:
+        moved = add_junk(scene, f"shift:{shift}")
+    except ValueError as e:
+        raise ValueError(f"fresh_shift={shift} on frame {spec.name!r}: {e}") from None
+    main = moved.main_object_mask
+    if main is None or not bool((main & moved.valid).any()):
+        raise ValueError(f"fresh_shift={shift} leaves no valid pixel of the main object of frame "
+                         f"{spec.name!r}: use a smaller shift, or fresh_shift=0")
+    return moved
 
 
 def _scorable(specs: list[Any], data_dir: Path) -> list[Any]:

@@ -572,9 +572,9 @@ def test_wide_junk_shrinks_the_view_into_its_centre_and_continues_the_floor_arou
 
 
 def test_shift_junk_cuts_the_first_rows_and_columns_so_the_strided_steps_read_other_pixels():
-    import torch
-
     import dataclasses
+
+    import torch
 
     from experiments.scenes import add_junk
     from somtorch.config import FeatureConfig

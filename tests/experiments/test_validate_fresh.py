@@ -134,7 +134,12 @@ def test_validate_command_reads_the_fresh_seeds_and_skips_them_when_asked(shared
     assert off["summary"] == rep["summary"]  # the fresh pass changes nothing of the main tables
 
 
-def test_a_negative_fresh_shift_fails_before_any_work():
+def test_a_fresh_shift_the_frames_cannot_take_fails_before_any_work(shared_data):
     for bad in (-1, 2.5, True):
         with pytest.raises(ValueError, match="fresh_shift=.*whole number of px, 0 or more"):
             evaluate(_cfg(fresh_shift=bad))
+    # too large for the frames: named by the check that reads every frame before any training (the
+    # fresh pass itself, after the main one, would fail with add_junk's message alone)
+    cfg = replace(_cfg(fresh_shift=10_000), paths=replace(_cfg().paths, data_dir=str(shared_data)))
+    with pytest.raises(ValueError, match=r"fresh_shift=10000 on frame '\w+'.*half its shorter side"):
+        evaluate(cfg)
