@@ -77,8 +77,11 @@ class ValidateConfig(RunConfig):
         fresh_seeds: also score the defaults, and the in-sample choice where one is adopted, on the
             next ``ensemble`` seeds (:func:`score_fresh_seeds`; off: a quicker trial).
         fresh_shift: that second pass reads every frame on a pixel grid shifted by this many px
-            (the ``shift:N`` transform: the strided steps read other pixels of the same scene,
-            which the rules were not chosen on either); 0 = the fresh seeds alone.
+            further (the ``shift:N`` transform: the strided steps read other pixels of the same
+            scene, which the rules were not chosen on either); 0 = the fresh seeds alone.
+        frame_shift: the whole protocol — defaults, grid, choices, folds, gallery, transforms —
+            reads every frame on a pixel grid shifted by this many px (``shift:N``; 0 = the frames
+            as given): a trial read on other pixels of the same scenes.
     """
 
     datasets: Optional[list[str]] = None
@@ -102,6 +105,8 @@ class ValidateConfig(RunConfig):
     fresh_seeds: bool = True
     # ... each frame on a grid shifted by this many px (experiments.scenes.add_junk "shift:N"; 0 = unshifted)
     fresh_shift: int = 5
+    # every frame of the protocol on a grid shifted by this many px (add_junk "shift:N"; 0 = as given)
+    frame_shift: int = 0
 
 
 def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any]:
@@ -117,9 +122,14 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
 
     for kind in cfg.transforms:  # before any work: a typo must not cost the whole protocol
         check_junk_kind(kind)
-    if isinstance(cfg.fresh_shift, bool) or not isinstance(cfg.fresh_shift, int) or cfg.fresh_shift < 0:
-        raise ValueError(f"fresh_shift={cfg.fresh_shift!r}: the fresh pass's grid shift must be a whole "
-                         "number of px, 0 or more (0 = the frames as given)")
+    for name in ("fresh_shift", "frame_shift"):
+        v = getattr(cfg, name)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            raise ValueError(f"{name}={v!r}: a grid shift must be a whole number of px, 0 or more "
+                             "(0 = the frames as given)")
+    if cfg.frame_shift and any(k.startswith("sgbm:") for k in cfg.transforms):
+        raise ValueError(f"frame_shift={cfg.frame_shift} with an sgbm: transform: it matches each frame's "
+                         "stereo pair again at its full size; run the sgbm: transforms with frame_shift=0")
     check_methods(cfg.baselines, "baselines")
     specs = frames(cfg.datasets, cfg.frames)
     if not specs:
@@ -150,11 +160,12 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
 
     def jobs():  # one frame at a time: a segmentation per upstream setting, an object step per candidate
         for spec in specs:
-            scene = load_frame(spec, data_dir)  # (read again: _scorable keeps no map in memory)
+            given = load_frame(spec, data_dir)  # (read again: _scorable keeps no map in memory)
+            scene = _shift_checked(given, spec, cfg.frame_shift, "frame_shift")
             yield scene, base, upstream
             yield scene, base, len(keys)
             if cfg.fresh_seeds:  # the defaults once more on the next seeds (score_fresh_seeds)
-                yield _fresh_checked(scene, spec, cfg.fresh_shift), base, 1
+                yield _shift_checked(given, spec, cfg.frame_shift + cfg.fresh_shift, "fresh_shift"), base, 1
 
     what = f"{len(specs)} frames x {len(keys)} candidates"
     est = check_resources(jobs(), cfg.resources, f"validation over {what}")
@@ -162,8 +173,12 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
              est.seconds / max(1, min(cfg.workers, len(specs))))
     t0 = time.perf_counter()
     resumed = json.loads(Path(cfg.resume).read_text()) if cfg.resume else {}
+    if cfg.resume and resumed.get(SHIFT_KEY, 0) != cfg.frame_shift:
+        raise ValueError(f"resume={cfg.resume}: its scores were read with frame_shift="
+                         f"{resumed.get(SHIFT_KEY, 0)}, this run reads frame_shift={cfg.frame_shift}")
     progress = _progress(len(specs))
-    caches = [SceneCache(s, None, base, loader=partial(load_frame, s, data_dir)) for s in specs]
+    caches = [SceneCache(s, None, base, loader=partial(shifted_frame, s, data_dir, cfg.frame_shift))
+              for s in specs]
     todo = []
     for i, c in enumerate(caches):
         c.scores = dict(resumed.get(c.spec.name, {}))  # what an earlier run scored is not scored again
@@ -176,7 +191,10 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     _score(caches, missing, cfg.workers, runs_log, progress)
     if cfg.scores_out:  # the per-frame scores, so that a later run can resume from them
         Path(cfg.scores_out).parent.mkdir(parents=True, exist_ok=True)
-        Path(cfg.scores_out).write_text(json.dumps({c.spec.name: c.scores for c in caches}))
+        out = {c.spec.name: c.scores for c in caches}
+        if cfg.frame_shift:  # scores of shifted frames resume only a run on the same grid
+            out[SHIFT_KEY] = cfg.frame_shift
+        Path(cfg.scores_out).write_text(json.dumps(out))
     progress.close()
     log.info("%d frames scored with %d candidates in %.0f s", len(caches), len(keys), time.perf_counter() - t0)
     proto = Protocol(caches, cfg, grid, defaults)
@@ -222,7 +240,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     return {"grid": grid, "defaults": defaults, "neutral": dict(cfg.neutral), "in_sample_choice": in_sample,
             "in_sample_steps": in_sample_steps, "folds": folds, "rows": rows, "summary": summary, "knobs": knobs,
             "rule": {"n_boot": cfg.n_boot, "loss_margin": cfg.loss_margin, "ni_margin": cfg.ni_margin,
-                     "ensemble": cfg.ensemble, "seed": cfg.seed},
+                     "ensemble": cfg.ensemble, "seed": cfg.seed, "frame_shift": cfg.frame_shift},
             "candidates": {c.spec.name: {k: {m: v[m] for m in ("runs", "useful_hits", "all_objects_hits")}
                                          for k, v in c.scores.items()} for c in caches},
             "fresh_seeds": fresh, "robustness": robustness,
@@ -267,26 +285,29 @@ def score_fresh_seeds(specs: list[Any], cfg: ValidateConfig, grid: dict[str, lis
                       runs_log: Path | None = None) -> dict[str, Any]:
     """The defaults, and the in-sample ``choice`` where the protocol adopted one, scored again on the
     next ``ensemble`` seeds (``seed + ensemble`` …), each frame on a pixel grid shifted by
-    ``cfg.fresh_shift`` px (:func:`fresh_frame`): runs nothing was chosen on. Every rule of the
+    ``cfg.fresh_shift`` px further than the main pass's (:func:`shifted_frame`): runs nothing was
+    chosen on. Every rule of the
     project was chosen by looking at the runs of the first seeds on the frames as given, so their
     figures are fitted to those runs and to the pixels the strided steps read there (session 40:
     the real macro falls by 4–5 points on a grid shifted by 3–7 px) as well as to the frames; the
     fresh pass says what the same scenes give on runs nobody looked at, and a choice is
     **confirmed** where the protocol adopts it again there. Per dataset and as macro averages:
     ``default_useful_hits``, ``default_all_objects_hits`` (and ``in_sample_…`` with a choice);
-    ``decision``, ``confirmed``: None without a choice; ``shift``: the grid's shift."""
+    ``decision``, ``confirmed``: None without a choice; ``shift``: the grid's shift (from the frames
+    as given)."""
     from dataclasses import replace
 
     base = replace(cfg, seed=cfg.seed + cfg.ensemble)
-    caches = [SceneCache(s, None, base, loader=partial(fresh_frame, s, data_dir, cfg.fresh_shift),
-                         ceilings=False) for s in specs]
+    shift = cfg.frame_shift + cfg.fresh_shift
+    caches = [SceneCache(s, None, base, loader=partial(shifted_frame, s, data_dir, shift), ceilings=False)
+              for s in specs]
     keys = [({}, False)] + ([(choice, False)] if choice else [])
     progress = _progress(len(specs))
     _score(caches, {i: keys for i in range(len(caches))}, cfg.workers, runs_log, progress)
     progress.close()
     proto = Protocol(caches, base, grid, defaults)
     t = proto.table
-    out: dict[str, Any] = {"seeds": [base.seed, base.seed + cfg.ensemble - 1], "shift": cfg.fresh_shift,
+    out: dict[str, Any] = {"seeds": [base.seed, base.seed + cfg.ensemble - 1], "shift": shift,
                            "choice": dict(choice),
                            "datasets": {d: {} for d in t.names}, "macro_real": {}, "macro_all": {},
                            "decision": None, "confirmed": None}
@@ -303,9 +324,13 @@ def score_fresh_seeds(specs: list[Any], cfg: ValidateConfig, grid: dict[str, lis
     return out
 
 
-def fresh_frame(spec: Any, data_dir: Path, shift: int) -> Any:
-    """The frame of ``spec`` as the fresh pass reads it: on a grid shifted by ``shift`` px
-    (``add_junk(scene, "shift:N")``; as given at 0)."""
+#: the key of a ``scores_out`` file that records the grid shift its scores were read on
+SHIFT_KEY = "__frame_shift__"
+
+
+def shifted_frame(spec: Any, data_dir: Path, shift: int) -> Any:
+    """The frame of ``spec`` on a pixel grid shifted by ``shift`` px (``add_junk(scene, "shift:N")``;
+    as given at 0): how the protocol (``frame_shift``) and its fresh pass read it."""
     from .datasets import load_frame
     from .scenes import add_junk
 
@@ -313,9 +338,9 @@ def fresh_frame(spec: Any, data_dir: Path, shift: int) -> Any:
     return add_junk(scene, f"shift:{shift}") if shift else scene
 
 
-def _fresh_checked(scene: Any, spec: Any, shift: int) -> Any:
-    """``scene`` as the fresh pass will read it, checked before any work: the shift must leave the
-    frame and a valid pixel of its main object (``ValueError`` naming the frame)."""
+def _shift_checked(scene: Any, spec: Any, shift: int, field: str) -> Any:
+    """``scene`` on a grid shifted by ``shift`` px, checked before any work: the shift must leave the
+    frame and a valid pixel of its main object (``ValueError`` naming ``field`` and the frame)."""
     if not shift:
         return scene
     from .scenes import add_junk
@@ -323,11 +348,11 @@ def _fresh_checked(scene: Any, spec: Any, shift: int) -> Any:
     try:
         moved = add_junk(scene, f"shift:{shift}")
     except ValueError as e:
-        raise ValueError(f"fresh_shift={shift} on frame {spec.name!r}: {e}") from None
+        raise ValueError(f"{field}: a shift of {shift} px on frame {spec.name!r}: {e}") from None
     main = moved.main_object_mask
     if main is None or not bool((main & moved.valid).any()):
-        raise ValueError(f"fresh_shift={shift} leaves no valid pixel of the main object of frame "
-                         f"{spec.name!r}: use a smaller shift, or fresh_shift=0")
+        raise ValueError(f"{field}: a shift of {shift} px leaves no valid pixel of the main object of frame "
+                         f"{spec.name!r}: use a smaller shift")
     return moved
 
 

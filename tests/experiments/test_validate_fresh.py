@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from experiments.datasets import frames, load_frame
-from experiments.validate import ValidateConfig, evaluate, fresh_frame, score_fresh_seeds
+from experiments.validate import ValidateConfig, evaluate, shifted_frame, score_fresh_seeds
 from experiments.validate_cache import SceneCache
 from experiments.validate_report import _fresh_markdown
 
@@ -38,10 +38,10 @@ def test_fresh_seeds_score_the_next_seeds_and_decide_the_choice_there(shared_dat
     fresh_base = replace(cfg, seed=5)
     for spec in specs:
         given = load_frame(spec, shared_data)
-        scene = fresh_frame(spec, Path(shared_data), 5)
+        scene = shifted_frame(spec, Path(shared_data), 5)
         assert scene.disparity.shape == (given.height - 5, given.width - 5)
         assert torch.equal(scene.disparity, given.disparity[5:, 5:])
-        assert fresh_frame(spec, Path(shared_data), 0).disparity.shape == given.disparity.shape
+        assert shifted_frame(spec, Path(shared_data), 0).disparity.shape == given.disparity.shape
         cache = SceneCache(spec, scene, fresh_base, ceilings=False)
         for part, ov in (("default", {}), ("in_sample", choice)):
             s = cache.score(ov)
@@ -107,7 +107,9 @@ def test_validate_command_reads_the_fresh_seeds_and_skips_them_when_asked(shared
             "baselines=[]"]
     runs = {}
     for name, extra in (("on", []), ("off", ["fresh_seeds=false"]),
-                        ("seed2", ["seed=2", "fresh_seeds=false", 'transforms=["shift:5"]'])):
+                        ("seed2", ["seed=2", "fresh_seeds=false", 'transforms=["shift:5"]']),
+                        ("moved", ["seed=2", "fresh_seeds=false", "frame_shift=5",
+                                   f"scores_out={tmp_path / 'moved.json'}"])):
         proc = subprocess.run(args + [f"hydra.run.dir={tmp_path / name}"] + extra, cwd=ROOT,
                               capture_output=True, text=True, timeout=600)
         assert proc.returncode == 0, proc.stderr[-2000:]
@@ -132,14 +134,31 @@ def test_validate_command_reads_the_fresh_seeds_and_skips_them_when_asked(shared
     assert off["fresh_seeds"] is None
     assert "On fresh seeds" not in (tmp_path / "off" / "validate.md").read_text()
     assert off["summary"] == rep["summary"]  # the fresh pass changes nothing of the main tables
+    # the whole protocol on a shifted grid: its defaults are the shift:5 transform's scores
+    moved = runs["moved"][0]
+    assert moved["rule"]["frame_shift"] == 5
+    assert {r["frame"]: r["default"]["useful_hits"] for r in moved["rows"]} == \
+        {name: sc["useful_hits"] for name, sc in shifted.items()}
+    said = (tmp_path / "moved" / "validate.md").read_text()
+    assert "Every frame read on a pixel grid shifted by 5 px" in said
+    # its scores resume only a run on the same grid
+    with pytest.raises(ValueError, match="frame_shift=5, this run reads frame_shift=0"):
+        evaluate(replace(_cfg(seed=2, fresh_seeds=False), resume=str(tmp_path / "moved.json"),
+                         paths=replace(_cfg().paths, data_dir=str(shared_data))))
 
 
-def test_a_fresh_shift_the_frames_cannot_take_fails_before_any_work(shared_data):
-    for bad in (-1, 2.5, True):
-        with pytest.raises(ValueError, match="fresh_shift=.*whole number of px, 0 or more"):
-            evaluate(_cfg(fresh_shift=bad))
+def test_a_grid_shift_the_frames_cannot_take_fails_before_any_work(shared_data, tmp_path):
+    for name in ("fresh_shift", "frame_shift"):
+        for bad in (-1, 2.5, True):
+            with pytest.raises(ValueError, match=f"{name}=.*whole number of px, 0 or more"):
+                evaluate(_cfg(**{name: bad}))
     # too large for the frames: named by the check that reads every frame before any training (the
     # fresh pass itself, after the main one, would fail with add_junk's message alone)
     cfg = replace(_cfg(fresh_shift=10_000), paths=replace(_cfg().paths, data_dir=str(shared_data)))
-    with pytest.raises(ValueError, match=r"fresh_shift=10000 on frame '\w+'.*half its shorter side"):
+    with pytest.raises(ValueError, match=r"fresh_shift: a shift of 10000 px on frame '\w+'.*half its"):
         evaluate(cfg)
+    cfg = replace(cfg, fresh_shift=5, frame_shift=9_995)  # the fresh pass reads both shifts
+    with pytest.raises(ValueError, match=r"frame_shift: a shift of 9995 px on frame '\w+'.*half its shorter"):
+        evaluate(cfg)
+    with pytest.raises(ValueError, match=r"frame_shift=5 with an sgbm: transform"):
+        evaluate(replace(cfg, frame_shift=5, transforms=["sgbm:raw"]))
