@@ -48,7 +48,9 @@ from omegaconf import DictConfig
 
 from . import CONF
 from .schema import RunConfig, register
-from .validate_cache import UPSTREAM, Protocol, SceneCache, _default_of, _key, _overrides, _score_frame
+from .validate_cache import (UPSTREAM, Protocol, SceneCache, _default_of, _key, _overrides, frames_progress,
+                             score_caches)
+from .validate_fresh import SHIFT_KEY, score_fresh_seeds, shift_checked, shifted_frame
 from .validate_report import gallery, summarize, to_markdown, verdict
 
 CONF_DIR = str(CONF)
@@ -161,11 +163,11 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     def jobs():  # one frame at a time: a segmentation per upstream setting, an object step per candidate
         for spec in specs:
             given = load_frame(spec, data_dir)  # (read again: _scorable keeps no map in memory)
-            scene = _shift_checked(given, spec, cfg.frame_shift, "frame_shift")
+            scene = shift_checked(given, spec, cfg.frame_shift, "frame_shift")
             yield scene, base, upstream
             yield scene, base, len(keys)
             if cfg.fresh_seeds:  # the defaults once more on the next seeds (score_fresh_seeds)
-                yield _shift_checked(given, spec, cfg.frame_shift + cfg.fresh_shift, "fresh_shift"), base, 1
+                yield shift_checked(given, spec, cfg.frame_shift + cfg.fresh_shift, "fresh_shift"), base, 1
 
     what = f"{len(specs)} frames x {len(keys)} candidates"
     est = check_resources(jobs(), cfg.resources, f"validation over {what}")
@@ -176,7 +178,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     if cfg.resume and resumed.get(SHIFT_KEY, 0) != cfg.frame_shift:
         raise ValueError(f"resume={cfg.resume}: its scores were read with frame_shift="
                          f"{resumed.get(SHIFT_KEY, 0)}, this run reads frame_shift={cfg.frame_shift}")
-    progress = _progress(len(specs))
+    progress = frames_progress(len(specs))
     caches = [SceneCache(s, None, base, loader=partial(shifted_frame, s, data_dir, cfg.frame_shift))
               for s in specs]
     todo = []
@@ -188,7 +190,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
             todo.append(i)
     missing = {i: [(ov, sal) for ov, sal in keys if _key(ov) not in caches[i].scores] for i in todo}
     interrupt.note(f"after {progress.n} of {len(specs)} frames")
-    _score(caches, missing, cfg.workers, runs_log, progress)
+    score_caches(caches, missing, cfg.workers, runs_log, progress)
     if cfg.scores_out:  # the per-frame scores, so that a later run can resume from them
         Path(cfg.scores_out).parent.mkdir(parents=True, exist_ok=True)
         out = {c.spec.name: c.scores for c in caches}
@@ -248,114 +250,6 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
             "wall_s": time.perf_counter() - t0}
 
 
-def _score(caches: list[SceneCache], missing: dict[int, list[tuple[dict[str, Any], bool]]], workers: int,
-           runs_log: Path | None, progress: Any) -> None:
-    """Score ``missing[i]`` (``[(overrides, saliency)]``) on ``caches[i]``, frame by frame, in
-    ``workers`` processes where there are several frames (one thread each: the scores come back, the
-    segmentations do not — a combination needed later is segmented again, deterministically)."""
-    from somtorch import interrupt
-
-    todo = list(missing)
-    if workers > 1 and len(todo) > 1:
-        import concurrent.futures as cf
-
-        from somtorch.interrupt import worker_pool
-
-        from .warning_log import worker_start
-
-        start = (worker_start, (str(runs_log),)) if runs_log is not None else (None, ())
-        with worker_pool(workers, *start) as pool:  # Ctrl-C / kill: the workers end at once
-            jobs = {i: (caches[i].spec, caches[i].base, missing[i], caches[i].source(), 1, caches[i].ceilings)
-                    for i in todo}
-            futures = {pool.submit(_score_frame, job): i for i, job in jobs.items()}
-            for fut in cf.as_completed(futures):
-                caches[futures[fut]].scores.update(fut.result())
-                progress.update(1)
-                interrupt.note(f"after {progress.n} of {len(caches)} frames")
-    else:
-        for i in todo:
-            for ov, sal in missing[i]:
-                caches[i].score(ov, saliency=sal)
-            progress.update(1)
-            interrupt.note(f"after {progress.n} of {len(caches)} frames")
-
-
-def score_fresh_seeds(specs: list[Any], cfg: ValidateConfig, grid: dict[str, list[Any]],
-                      defaults: dict[str, Any], choice: dict[str, Any], data_dir: Path,
-                      runs_log: Path | None = None) -> dict[str, Any]:
-    """The defaults, and the in-sample ``choice`` where the protocol adopted one, scored again on the
-    next ``ensemble`` seeds (``seed + ensemble`` …), each frame on a pixel grid shifted by
-    ``cfg.fresh_shift`` px further than the main pass's (:func:`shifted_frame`): runs nothing was
-    chosen on. Every rule of the
-    project was chosen by looking at the runs of the first seeds on the frames as given, so their
-    figures are fitted to those runs and to the pixels the strided steps read there (session 40:
-    the real macro falls by 4–5 points on a grid shifted by 3–7 px) as well as to the frames; the
-    fresh pass says what the same scenes give on runs nobody looked at, and a choice is
-    **confirmed** where the protocol adopts it again there. Per dataset and as macro averages:
-    ``default_useful_hits``, ``default_all_objects_hits`` (and ``in_sample_…`` with a choice);
-    ``decision``, ``confirmed``: None without a choice; ``shift``: the grid's shift (from the frames
-    as given)."""
-    from dataclasses import replace
-
-    base = replace(cfg, seed=cfg.seed + cfg.ensemble)
-    shift = cfg.frame_shift + cfg.fresh_shift
-    caches = [SceneCache(s, None, base, loader=partial(shifted_frame, s, data_dir, shift), ceilings=False)
-              for s in specs]
-    keys = [({}, False)] + ([(choice, False)] if choice else [])
-    progress = _progress(len(specs))
-    _score(caches, {i: keys for i in range(len(caches))}, cfg.workers, runs_log, progress)
-    progress.close()
-    proto = Protocol(caches, base, grid, defaults)
-    t = proto.table
-    out: dict[str, Any] = {"seeds": [base.seed, base.seed + cfg.ensemble - 1], "shift": shift,
-                           "choice": dict(choice),
-                           "datasets": {d: {} for d in t.names}, "macro_real": {}, "macro_all": {},
-                           "decision": None, "confirmed": None}
-    for part, ov in [("default", {})] + ([("in_sample", choice)] if choice else []):
-        for m in ("useful_hits", "all_objects_hits"):
-            v = proto.rates(ov, m)
-            for d, x in t.per_dataset(v).items():
-                out["datasets"][d][f"{part}_{m}"] = x
-            out["macro_real"][f"{part}_{m}"] = t.macro(v, True)[0]
-            out["macro_all"][f"{part}_{m}"] = t.macro(v, False)[0]
-    if choice:
-        dec = proto.decide(choice, {})
-        out["decision"], out["confirmed"] = dec.as_dict(), bool(dec.adopt)
-    return out
-
-
-#: the key of a ``scores_out`` file that records the grid shift its scores were read on
-SHIFT_KEY = "__frame_shift__"
-
-
-def shifted_frame(spec: Any, data_dir: Path, shift: int) -> Any:
-    """The frame of ``spec`` on a pixel grid shifted by ``shift`` px (``add_junk(scene, "shift:N")``;
-    as given at 0): how the protocol (``frame_shift``) and its fresh pass read it."""
-    from .datasets import load_frame
-    from .scenes import add_junk
-
-    scene = load_frame(spec, data_dir)
-    return add_junk(scene, f"shift:{shift}") if shift else scene
-
-
-def _shift_checked(scene: Any, spec: Any, shift: int, field: str) -> Any:
-    """``scene`` on a grid shifted by ``shift`` px, checked before any work: the shift must leave the
-    frame and a valid pixel of its main object (``ValueError`` naming ``field`` and the frame)."""
-    if not shift:
-        return scene
-    from .scenes import add_junk
-
-    try:
-        moved = add_junk(scene, f"shift:{shift}")
-    except ValueError as e:
-        raise ValueError(f"{field}: a shift of {shift} px on frame {spec.name!r}: {e}") from None
-    main = moved.main_object_mask
-    if main is None or not bool((main & moved.valid).any()):
-        raise ValueError(f"{field}: a shift of {shift} px leaves no valid pixel of the main object of frame "
-                         f"{spec.name!r}: use a smaller shift")
-    return moved
-
-
 def _scorable(specs: list[Any], data_dir: Path) -> list[Any]:
     """The frames whose main object has a valid disparity pixel (an SGBM map may have none on a
     textureless object: such a frame cannot be scored, and is left out with a warning)."""
@@ -375,13 +269,6 @@ def _scorable(specs: list[Any], data_dir: Path) -> list[Any]:
     if not out:
         raise ValueError("no frame can be scored")
     return out
-
-
-def _progress(total: int) -> Any:
-    """A progress bar over the frames (off with ``--quiet`` or where stderr is not a terminal)."""
-    from .cli import progress_bar
-
-    return progress_bar(total, "frames", "frame")
 
 
 def transformed(caches: list[SceneCache], kind: str, baselines: list[str] | None = None,

@@ -7,6 +7,7 @@ makes the choices (adoption of each knob, then the greedy join) on a set of fram
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -220,3 +221,42 @@ def _default_of(cfg: Any, key: str) -> Any:
     for part in key.split("."):
         obj = getattr(obj, part)
     return obj
+
+
+def frames_progress(total: int) -> Any:
+    """A progress bar over the frames (off with ``--quiet`` or where stderr is not a terminal)."""
+    from .cli import progress_bar
+
+    return progress_bar(total, "frames", "frame")
+
+
+def score_caches(caches: list[SceneCache], missing: dict[int, list[tuple[dict[str, Any], bool]]], workers: int,
+           runs_log: Path | None, progress: Any) -> None:
+    """Score ``missing[i]`` (``[(overrides, saliency)]``) on ``caches[i]``, frame by frame, in
+    ``workers`` processes where there are several frames (one thread each: the scores come back, the
+    segmentations do not — a combination needed later is segmented again, deterministically)."""
+    from somtorch import interrupt
+
+    todo = list(missing)
+    if workers > 1 and len(todo) > 1:
+        import concurrent.futures as cf
+
+        from somtorch.interrupt import worker_pool
+
+        from .warning_log import worker_start
+
+        start = (worker_start, (str(runs_log),)) if runs_log is not None else (None, ())
+        with worker_pool(workers, *start) as pool:  # Ctrl-C / kill: the workers end at once
+            jobs = {i: (caches[i].spec, caches[i].base, missing[i], caches[i].source(), 1, caches[i].ceilings)
+                    for i in todo}
+            futures = {pool.submit(_score_frame, job): i for i, job in jobs.items()}
+            for fut in cf.as_completed(futures):
+                caches[futures[fut]].scores.update(fut.result())
+                progress.update(1)
+                interrupt.note(f"after {progress.n} of {len(caches)} frames")
+    else:
+        for i in todo:
+            for ov, sal in missing[i]:
+                caches[i].score(ov, saliency=sal)
+            progress.update(1)
+            interrupt.note(f"after {progress.n} of {len(caches)} frames")
