@@ -230,8 +230,8 @@ def frames_progress(total: int) -> Any:
     return progress_bar(total, "frames", "frame")
 
 
-def score_caches(caches: list[SceneCache], missing: dict[int, list[tuple[dict[str, Any], bool]]], workers: int,
-           runs_log: Path | None, progress: Any) -> None:
+def score_caches(caches: list[SceneCache], missing: dict[int, list[tuple[dict[str, Any], bool]]],
+                 workers: int, runs_log: Path | None, progress: Any) -> None:
     """Score ``missing[i]`` (``[(overrides, saliency)]``) on ``caches[i]``, frame by frame, in
     ``workers`` processes where there are several frames (one thread each: the scores come back, the
     segmentations do not — a combination needed later is segmented again, deterministically)."""

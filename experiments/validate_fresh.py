@@ -57,10 +57,10 @@ def score_fresh_seeds(specs: list[Any], cfg: ValidateConfig, grid: dict[str, lis
     the frames as given, so their figures are fitted to those runs and to the pixels the strided
     steps read there (session 40: the real macro falls by 4–5 points on a grid shifted by 3–7 px)
     as well as to the frames; the fresh pass says what the same scenes give on runs nobody looked
-    at, and a choice is **confirmed** where the protocol adopts it again there. Per dataset and as macro averages:
-    ``default_useful_hits``, ``default_all_objects_hits`` (and ``in_sample_…`` with a choice);
-    ``decision``, ``confirmed``: None without a choice; ``shift``: the grid's shift (from the frames
-    as given)."""
+    at, and a choice is **confirmed** where the protocol adopts it again there. Per dataset and as
+    macro averages: ``default_useful_hits``, ``default_all_objects_hits`` (and ``in_sample_…`` with
+    a choice); ``decision``, ``confirmed``: None without a choice; ``shift``: the grid's shift (from
+    the frames as given)."""
     from dataclasses import replace
 
     base = replace(cfg, seed=cfg.seed + cfg.ensemble)
