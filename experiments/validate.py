@@ -49,7 +49,7 @@ from omegaconf import DictConfig
 from . import CONF
 from .schema import RunConfig, register
 from .validate_cache import (UPSTREAM, Protocol, SceneCache, _default_of, _key, _overrides, frames_progress,
-                             score_caches)
+                             scorable, score_caches)
 from .validate_fresh import SHIFT_KEY, score_fresh_seeds, shift_checked, shifted_frame
 from .validate_report import gallery, summarize, to_markdown, verdict
 
@@ -257,9 +257,7 @@ def _scorable(specs: list[Any], data_dir: Path) -> list[Any]:
 
     out, dropped = [], []
     for s in specs:
-        scene = load_frame(s, data_dir)
-        main = scene.main_object_mask
-        if main is None or not bool((main & scene.valid).any()):
+        if not scorable(load_frame(s, data_dir)):
             dropped.append(s.name)
         else:
             out.append(s)

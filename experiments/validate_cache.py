@@ -223,6 +223,13 @@ def _default_of(cfg: Any, key: str) -> Any:
     return obj
 
 
+def scorable(scene: Any) -> bool:
+    """Whether ``scene`` can be scored: its main object has a valid disparity pixel (an SGBM map may
+    have none on a textureless object, a shifted grid may cut it off)."""
+    main = scene.main_object_mask
+    return main is not None and bool((main & scene.valid).any())
+
+
 def frames_progress(total: int) -> Any:
     """A progress bar over the frames (off with ``--quiet`` or where stderr is not a terminal)."""
     from .cli import progress_bar

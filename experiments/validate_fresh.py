@@ -9,7 +9,7 @@ from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .validate_cache import Protocol, SceneCache, frames_progress, score_caches
+from .validate_cache import Protocol, SceneCache, frames_progress, scorable, score_caches
 
 if TYPE_CHECKING:
     from .validate import ValidateConfig
@@ -40,8 +40,7 @@ def shift_checked(scene: Any, spec: Any, shift: int, field: str) -> Any:
         moved = add_junk(scene, f"shift:{shift}")
     except ValueError as e:
         raise ValueError(f"{field}: a shift of {shift} px on frame {spec.name!r}: {e}") from None
-    main = moved.main_object_mask
-    if main is None or not bool((main & moved.valid).any()):
+    if not scorable(moved):
         raise ValueError(f"{field}: a shift of {shift} px leaves no valid pixel of the main object of frame "
                          f"{spec.name!r}: use a smaller shift")
     return moved
