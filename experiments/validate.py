@@ -48,9 +48,10 @@ from omegaconf import DictConfig
 
 from . import CONF
 from .schema import RunConfig, register
-from .validate_cache import (UPSTREAM, Protocol, SceneCache, _default_of, _key, _overrides, frames_progress,
-                             scorable, score_caches)
-from .validate_fresh import SHIFT_KEY, score_fresh_seeds, shift_checked, shifted_frame
+from .validate_cache import (UPSTREAM, GridCache, Protocol, SceneCache, _default_of, _key, _overrides,
+                             frames_progress, merge_scores, scorable, score_caches)
+from .validate_fresh import (SHIFT_KEY, check_shifts, grid_name, per_grid_macros, score_fresh_seeds,
+                             shift_checked, shifted_frame)
 from .validate_report import gallery, summarize, to_markdown, verdict
 
 CONF_DIR = str(CONF)
@@ -79,11 +80,14 @@ class ValidateConfig(RunConfig):
         fresh_seeds: also score the defaults, and the in-sample choice where one is adopted, on the
             next ``ensemble`` seeds (:func:`score_fresh_seeds`; off: a quicker trial).
         fresh_shift: that second pass reads every frame on a pixel grid shifted by this many px
-            further (the ``shift:N`` transform: the strided steps read other pixels of the same
-            scene, which the rules were not chosen on either); 0 = the fresh seeds alone.
-        frame_shift: the whole protocol — defaults, grid, choices, folds, gallery, transforms —
-            reads every frame on a pixel grid shifted by this many px (``shift:N``; 0 = the frames
-            as given): a trial read on other pixels of the same scenes.
+            further than the largest of ``frame_shifts`` (the ``shift:N`` transform: the strided
+            steps read other pixels of the same scene, which the rules were not chosen on either);
+            0 = the fresh seeds alone, on the last grid.
+        frame_shifts: the pixel grids the protocol decides on: every frame read shifted by each of
+            these many px (``shift:N``; 0 = as given), a candidate's runs summed over them, so that
+            a choice is decided on the pixels of several grids at once (session 41; session 40
+            found a real figure 4–5 points apart between grids 3–7 px apart). The gallery and the
+            transforms read the first grid.
     """
 
     datasets: Optional[list[str]] = None
@@ -105,10 +109,13 @@ class ValidateConfig(RunConfig):
     # the defaults (and an adopted choice) scored again on the next `ensemble` seeds: runs nothing was
     # chosen on (score_fresh_seeds); a choice is confirmed where it is adopted there too
     fresh_seeds: bool = True
-    # ... each frame on a grid shifted by this many px (experiments.scenes.add_junk "shift:N"; 0 = unshifted)
-    fresh_shift: int = 5
-    # every frame of the protocol on a grid shifted by this many px (add_junk "shift:N"; 0 = as given)
-    frame_shift: int = 0
+    # ... each frame on a grid shifted this many px further than the last of frame_shifts (add_junk
+    # "shift:N"; 3: a phase of the training grid (stride 10) and of the object step's (stride 2) that
+    # neither 0 nor 5 reads; 0 = the fresh seeds alone)
+    fresh_shift: int = 3
+    # the pixel grids the protocol decides on: every frame shifted by each (add_junk "shift:N"; 0 = as
+    # given), a candidate's runs summed over them
+    frame_shifts: list[int] = field(default_factory=lambda: [0, 5])
 
 
 def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any]:
@@ -124,14 +131,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
 
     for kind in cfg.transforms:  # before any work: a typo must not cost the whole protocol
         check_junk_kind(kind)
-    for name in ("fresh_shift", "frame_shift"):
-        v = getattr(cfg, name)
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-            raise ValueError(f"{name}={v!r}: a grid shift must be a whole number of px, 0 or more "
-                             "(0 = the frames as given)")
-    if cfg.frame_shift and any(k.startswith("sgbm:") for k in cfg.transforms):
-        raise ValueError(f"frame_shift={cfg.frame_shift} with an sgbm: transform: it matches each frame's "
-                         "stereo pair again at its full size; run the sgbm: transforms with frame_shift=0")
+    shifts = check_shifts(cfg)
     check_methods(cfg.baselines, "baselines")
     specs = frames(cfg.datasets, cfg.frames)
     if not specs:
@@ -163,42 +163,48 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     def jobs():  # one frame at a time: a segmentation per upstream setting, an object step per candidate
         for spec in specs:
             given = load_frame(spec, data_dir)  # (read again: _scorable keeps no map in memory)
-            scene = shift_checked(given, spec, cfg.frame_shift, "frame_shift")
-            yield scene, base, upstream
-            yield scene, base, len(keys)
+            for shift in shifts:  # every grid checked before any work
+                scene = shift_checked(given, spec, shift, "frame_shifts")
+                yield scene, base, upstream
+                yield scene, base, len(keys)
             if cfg.fresh_seeds:  # the defaults once more on the next seeds (score_fresh_seeds)
-                yield shift_checked(given, spec, cfg.frame_shift + cfg.fresh_shift, "fresh_shift"), base, 1
+                yield shift_checked(given, spec, max(shifts) + cfg.fresh_shift, "fresh_shift"), base, 1
 
-    what = f"{len(specs)} frames x {len(keys)} candidates"
+    what = f"{len(specs)} frames x {len(keys)} candidates" + (f" x {len(shifts)} grids" if len(shifts) > 1
+                                                              else "")
     est = check_resources(jobs(), cfg.resources, f"validation over {what}")
     announce("validate", what + (f", {cfg.workers} workers" if cfg.workers > 1 else ""),
              est.seconds / max(1, min(cfg.workers, len(specs))))
     t0 = time.perf_counter()
     resumed = json.loads(Path(cfg.resume).read_text()) if cfg.resume else {}
-    if cfg.resume and resumed.get(SHIFT_KEY, 0) != cfg.frame_shift:
-        raise ValueError(f"resume={cfg.resume}: its scores were read with frame_shift="
-                         f"{resumed.get(SHIFT_KEY, 0)}, this run reads frame_shift={cfg.frame_shift}")
-    progress = frames_progress(len(specs))
-    caches = [SceneCache(s, None, base, loader=partial(shifted_frame, s, data_dir, cfg.frame_shift))
-              for s in specs]
+    if cfg.resume and resumed.get(SHIFT_KEY, [0]) != shifts:
+        raise ValueError(f"resume={cfg.resume}: its scores were read with frame_shifts="
+                         f"{resumed.get(SHIFT_KEY, [0])}, this run reads frame_shifts={shifts}")
+    progress = frames_progress(len(specs) * len(shifts))
+    on_grids = [SceneCache(s, None, base, loader=partial(shifted_frame, s, data_dir, shift))
+                for s in specs for shift in shifts]  # frame by frame, each on every grid
     todo = []
-    for i, c in enumerate(caches):
-        c.scores = dict(resumed.get(c.spec.name, {}))  # what an earlier run scored is not scored again
+    for i, c in enumerate(on_grids):
+        # what an earlier run scored is not scored again
+        c.scores = dict(resumed.get(grid_name(c.spec.name, shifts[i % len(shifts)]), {}))
         if all(_key(ov) in c.scores for ov, _ in keys):
             progress.update(1)
         else:
             todo.append(i)
-    missing = {i: [(ov, sal) for ov, sal in keys if _key(ov) not in caches[i].scores] for i in todo}
-    interrupt.note(f"after {progress.n} of {len(specs)} frames")
-    score_caches(caches, missing, cfg.workers, runs_log, progress)
+    missing = {i: [(ov, sal) for ov, sal in keys if _key(ov) not in on_grids[i].scores] for i in todo}
+    interrupt.note(f"after {progress.n} of {len(on_grids)} frames")
+    score_caches(on_grids, missing, cfg.workers, runs_log, progress)
     if cfg.scores_out:  # the per-frame scores, so that a later run can resume from them
         Path(cfg.scores_out).parent.mkdir(parents=True, exist_ok=True)
-        out = {c.spec.name: c.scores for c in caches}
-        if cfg.frame_shift:  # scores of shifted frames resume only a run on the same grid
-            out[SHIFT_KEY] = cfg.frame_shift
+        out: dict[str, Any] = {grid_name(c.spec.name, shifts[i % len(shifts)]): c.scores
+                               for i, c in enumerate(on_grids)}
+        if shifts != [0]:  # scores of shifted frames resume only a run on the same grids
+            out[SHIFT_KEY] = shifts
         Path(cfg.scores_out).write_text(json.dumps(out))
     progress.close()
-    log.info("%d frames scored with %d candidates in %.0f s", len(caches), len(keys), time.perf_counter() - t0)
+    caches = [GridCache(on_grids[i:i + len(shifts)]) for i in range(0, len(on_grids), len(shifts))]
+    log.info("%d frames scored with %d candidates on %d grid(s) in %.0f s", len(caches), len(keys),
+             len(shifts), time.perf_counter() - t0)
     proto = Protocol(caches, cfg, grid, defaults)
     in_sample, in_sample_steps = proto.choose()
     for c in caches:
@@ -233,8 +239,11 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
                 kn["verdict"] += " (not confirmed on fresh seeds)"
     from .validate_baselines import score_baselines, summarize_baselines
 
-    for row, got in zip(rows, score_baselines(caches, cfg.baselines, cfg.reduction).values()):
-        row["baselines"] = got
+    per_grid = score_baselines(on_grids, cfg.baselines, cfg.reduction, [grid_name(c.spec.name, shifts[i % len(
+        shifts)]) for i, c in enumerate(on_grids)])
+    for row, c in zip(rows, caches):
+        row["baselines"] = {n: merge_scores([per_grid[grid_name(c.spec.name, s)][n] for s in shifts])
+                            for n in cfg.baselines}
     if cfg.gallery is not None:
         for c in caches:
             gallery(c, Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
@@ -242,7 +251,8 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     return {"grid": grid, "defaults": defaults, "neutral": dict(cfg.neutral), "in_sample_choice": in_sample,
             "in_sample_steps": in_sample_steps, "folds": folds, "rows": rows, "summary": summary, "knobs": knobs,
             "rule": {"n_boot": cfg.n_boot, "loss_margin": cfg.loss_margin, "ni_margin": cfg.ni_margin,
-                     "ensemble": cfg.ensemble, "seed": cfg.seed, "frame_shift": cfg.frame_shift},
+                     "ensemble": cfg.ensemble, "seed": cfg.seed, "frame_shifts": shifts},
+            "grids": per_grid_macros(proto.table, on_grids, shifts),
             "candidates": {c.spec.name: {k: {m: v[m] for m in ("runs", "useful_hits", "all_objects_hits")}
                                          for k, v in c.scores.items()} for c in caches},
             "fresh_seeds": fresh, "robustness": robustness,

@@ -34,14 +34,16 @@ def check_trained(names: list[str], specs: list[Any]) -> None:
                 load()
 
 
-def score_baselines(caches: list[Any], names: list[str], reduction: Any) -> dict[str, dict[str, Any]]:
-    """``{frame: {baseline: counts}}`` for every frame cache (``experiments.validate_cache.SceneCache``);
+def score_baselines(caches: list[Any], names: list[str], reduction: Any,
+                    keys: list[str] | None = None) -> dict[str, dict[str, Any]]:
+    """``{frame: {baseline: counts}}`` for every frame cache (``experiments.validate_cache.SceneCache``),
+    keyed by ``keys`` (default: the frames' names; one frame on several grids has a key per grid);
     a baseline that does not apply to a frame (no metric camera) gets None."""
     out: dict[str, dict[str, Any]] = {}
-    for c in caches:
+    for c, key in zip(caches, keys or [c.spec.name for c in caches]):
         # (the scene is not kept: 352 frames' maps would stay in memory)
-        out[c.spec.name] = per = baseline_counts(c.fresh_scene(), names, reduction, c.spec.camera)
-        log.info("%s: baselines %s", c.spec.name, ", ".join(
+        out[key] = per = baseline_counts(c.fresh_scene(), names, reduction, c.spec.camera)
+        log.info("%s: baselines %s", key, ", ".join(
             f"{n} {'–' if p is None else 'useful' if p['useful_hits'] else 'miss'}" for n, p in per.items()))
     return out
 

@@ -133,6 +133,59 @@ class SceneCache:
         return self.scores[key]
 
 
+class GridCache:
+    """One frame read on several pixel grids (``validate``'s ``frame_shifts``): a :class:`SceneCache`
+    per grid, and a candidate's scores summed over them (:func:`merge_scores`) — the frame's runs on
+    two grids count as twice the seeds would, so the protocol's per-frame rate is the mean over the
+    grids and a choice is decided on every grid at once. The picture, the transforms and the
+    baselines' pictures read the first grid's frame (:attr:`scene`)."""
+
+    def __init__(self, grids: list[SceneCache]) -> None:
+        self.grids = grids
+        self.spec, self.base = grids[0].spec, grids[0].base
+
+    @property
+    def scene(self) -> Any:
+        return self.grids[0].scene
+
+    def fresh_scene(self) -> Any:
+        return self.grids[0].fresh_scene()
+
+    def members(self, overrides: dict[str, Any], first_place: bool = False) -> tuple[Any, list]:
+        return self.grids[0].members(overrides, first_place)
+
+    @property
+    def scores(self) -> dict[str, dict[str, Any]]:
+        """The merged scores of every candidate scored on all the grids."""
+        keys = [k for k in self.grids[0].scores if all(k in g.scores for g in self.grids[1:])]
+        return {k: merge_scores([g.scores[k] for g in self.grids]) for k in keys}
+
+    def score(self, overrides: dict[str, Any], saliency: bool = False) -> dict[str, Any]:
+        return merge_scores([g.score(overrides, saliency) for g in self.grids])
+
+
+#: per-frame figures that describe the frame, not its runs: not summed over the grids (the first's)
+_FRAME_FIGURES = ("n_objects",)
+
+
+def merge_scores(parts: list[Any]) -> Any:
+    """The scores of one frame on several grids as one: counts (ints) summed, rates and means
+    (floats) averaged (each grid runs the same seeds), nested dicts merged alike; None where a grid
+    has none (a baseline that does not apply). One part: that part itself."""
+    if len(parts) == 1:
+        return parts[0]
+    first = parts[0]
+    if first is None or any(p is None for p in parts):
+        return None
+    if isinstance(first, dict):
+        return {k: first[k] if k in _FRAME_FIGURES else merge_scores([p[k] for p in parts]) for k in first}
+    if isinstance(first, bool) or not isinstance(first, (int, float)):
+        return first
+    if isinstance(first, int) and all(isinstance(p, int) and not isinstance(p, bool) for p in parts):
+        return sum(parts)
+    return float(sum(parts)) / len(parts)
+
+
 def _score_frame(job: tuple) -> dict[str, dict[str, Any]]:
     """A worker's job: every candidate of ``keys`` (``[(overrides, saliency)]``) on one frame, read
     from ``source`` (:meth:`SceneCache.source`: the same loader the parent's cache would call, so a

@@ -1,7 +1,7 @@
 """The protocol's fresh pass and its pixel grids (``experiments.validate``): the defaults, and an
 adopted choice, scored again on runs nothing was chosen on — the next seeds, each frame on a pixel
-grid shifted by ``fresh_shift`` px (session 40) — and the frames as the protocol reads them on a
-shifted grid (``frame_shift``)."""
+grid shifted by ``fresh_shift`` px (session 40) — and the frames as the protocol reads them on
+the shifted grids it decides on (``frame_shifts``, session 41)."""
 
 from __future__ import annotations
 
@@ -9,19 +9,57 @@ from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from .validate_cache import Protocol, SceneCache, frames_progress, scorable, score_caches
 
 if TYPE_CHECKING:
     from .validate import ValidateConfig
 
 
-#: the key of a ``scores_out`` file that records the grid shift its scores were read on
-SHIFT_KEY = "__frame_shift__"
+#: the key of a ``scores_out`` file that records the grid shifts its scores were read on
+SHIFT_KEY = "__frame_shifts__"
+
+
+def check_shifts(cfg: ValidateConfig) -> list[int]:
+    """``cfg.frame_shifts`` as a list, checked before any work (with ``cfg.fresh_shift``): whole
+    numbers of px, 0 or more, at least one grid and none twice; no ``sgbm:`` transform where the
+    first grid is shifted (it matches a frame's stereo pair again at its full size)."""
+    for name, values in (("fresh_shift", [cfg.fresh_shift]), ("frame_shifts", list(cfg.frame_shifts))):
+        for v in values:
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"{name}: {v!r}: a grid shift must be a whole number of px, 0 or more "
+                                 "(0 = the frames as given)")
+    shifts = list(cfg.frame_shifts)
+    if not shifts or len(set(shifts)) < len(shifts):
+        raise ValueError(f"frame_shifts={shifts}: give each grid once, at least one "
+                         "(0 = the frames as given)")
+    if shifts[0] and any(k.startswith("sgbm:") for k in cfg.transforms):
+        raise ValueError(f"frame_shifts={shifts} with an sgbm: transform: it matches each frame's stereo "
+                         "pair again at its full size; run the sgbm: transforms with the first grid at 0")
+    return shifts
+
+
+def grid_name(frame: str, shift: int) -> str:
+    """The key of ``frame`` read on the grid shifted by ``shift`` px in a ``scores_out`` file (the
+    frame's name as given)."""
+    return f"{frame}@{shift}" if shift else frame
+
+
+def per_grid_macros(table: Any, on_grids: list[SceneCache], shifts: list[int]) -> dict[str, dict[str, float]]:
+    """The defaults' real and all-dataset macro useful-hit rates on each grid alone (``on_grids``:
+    frame by frame, each on every grid of ``shifts``), keyed by the shift: how far apart the grids
+    the protocol sums read the same rule."""
+    out = {}
+    for j, shift in enumerate(shifts):
+        v = np.array([(r := c.score({}))["useful_hits"] / r["runs"] for c in on_grids[j::len(shifts)]])
+        out[str(shift)] = {"macro_real": table.macro(v, True)[0], "macro_all": table.macro(v, False)[0]}
+    return out
 
 
 def shifted_frame(spec: Any, data_dir: Path, shift: int) -> Any:
     """The frame of ``spec`` on a pixel grid shifted by ``shift`` px (``add_junk(scene, "shift:N")``;
-    as given at 0): how the protocol (``frame_shift``) and its fresh pass read it."""
+    as given at 0): how the protocol (``frame_shifts``) and its fresh pass read it."""
     from .datasets import load_frame
     from .scenes import add_junk
 
@@ -51,19 +89,19 @@ def score_fresh_seeds(specs: list[Any], cfg: ValidateConfig, grid: dict[str, lis
                       runs_log: Path | None = None) -> dict[str, Any]:
     """The defaults, and the in-sample ``choice`` where the protocol adopted one, scored again on the
     next ``ensemble`` seeds (``seed + ensemble`` …), each frame on a pixel grid shifted by
-    ``cfg.fresh_shift`` px further than the main pass's (:func:`shifted_frame`): runs nothing was
-    chosen on. Every rule of the project was chosen by looking at the runs of the first seeds on
-    the frames as given, so their figures are fitted to those runs and to the pixels the strided
-    steps read there (session 40: the real macro falls by 4–5 points on a grid shifted by 3–7 px)
-    as well as to the frames; the fresh pass says what the same scenes give on runs nobody looked
-    at, and a choice is **confirmed** where the protocol adopts it again there. Per dataset and as
-    macro averages: ``default_useful_hits``, ``default_all_objects_hits`` (and ``in_sample_…`` with
-    a choice); ``decision``, ``confirmed``: None without a choice; ``shift``: the grid's shift (from
-    the frames as given)."""
+    ``cfg.fresh_shift`` px further than the largest of the main pass's grids
+    (:func:`shifted_frame`): runs nothing was chosen on. Every rule of the project was chosen by
+    looking at the runs of the first seeds on the frames as given, so their figures are fitted to
+    those runs and to the pixels the strided steps read there (session 40: the real macro falls by
+    4–5 points on a grid shifted by 3–7 px) as well as to the frames; the fresh pass says what the
+    same scenes give on runs nobody looked at, and a choice is **confirmed** where the protocol
+    adopts it again there. Per dataset and as macro averages: ``default_useful_hits``,
+    ``default_all_objects_hits`` (and ``in_sample_…`` with a choice); ``decision``, ``confirmed``:
+    None without a choice; ``shift``: the grid's shift (from the frames as given)."""
     from dataclasses import replace
 
     base = replace(cfg, seed=cfg.seed + cfg.ensemble)
-    shift = cfg.frame_shift + cfg.fresh_shift
+    shift = max(cfg.frame_shifts) + cfg.fresh_shift
     caches = [SceneCache(s, None, base, loader=partial(shifted_frame, s, data_dir, shift), ceilings=False)
               for s in specs]
     keys = [({}, False)] + ([(choice, False)] if choice else [])

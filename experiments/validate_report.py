@@ -79,13 +79,25 @@ def _ci(t: Any) -> str:
     return f"{100 * t[0]:+.1f} [{100 * t[1]:+.1f}, {100 * t[2]:+.1f}]"
 
 
+def _grids_lines(report: dict[str, Any]) -> list[str]:
+    """The pixel grids the protocol decided on (``frame_shifts``) and the defaults' macros on each
+    alone; nothing for the frames as given alone."""
+    shifts = report.get("rule", {}).get("frame_shifts", [0])
+    if shifts == [0]:
+        return []
+    each = report.get("grids", {})
+    per = "; ".join(f"{s} px: real {_pct(each[str(s)]['macro_real'])} %, "
+                    f"all {_pct(each[str(s)]['macro_all'])} %" for s in shifts if str(s) in each)
+    return [f"Every frame read on the pixel grids shifted by {', '.join(map(str, shifts))} px "
+            "(`frame_shifts`: the `shift:N` transform, 0 = as given; the strided steps read other pixels of "
+            "the same scenes), a candidate's runs summed over them: the rates below are the means over the grids"
+            + (f" (the defaults' useful-hit macros on each grid alone — {per})" if per else "") + ".", ""]
+
+
 def to_markdown(report: dict[str, Any]) -> str:
     """The tables: per dataset (rates in % of runs), the macro averages, every knob's decisions."""
     sm = report["summary"]
-    shift = report.get("rule", {}).get("frame_shift", 0)
-    out = [f"Every frame read on a pixel grid shifted by {shift} px (`frame_shift={shift}`: the "
-           f"`shift:{shift}` transform; the strided steps read other pixels of the same scenes).",
-           ""] if shift else []
+    out = _grids_lines(report)
     out += ["Per dataset, % of runs (useful = the paper's main-object useful hit; all-obj = every labelled "
             "object >= 95 % kept at >= 0.75 x the union-of-boxes reduction):", "",
             "| dataset | real | frames | runs | objects / frame | valid | x_opt | default useful | in-sample useful | "
@@ -221,8 +233,8 @@ def _fresh_markdown(report: dict[str, Any]) -> list[str]:
     head = "| dataset | " + " | ".join(f"{lab} useful | **fresh seeds** | {lab} all-obj | **fresh seeds**"
                                        for _, lab in parts) + " |"
     a, b = fresh["seeds"]
-    shift, main = fresh.get("shift", 0), report["rule"].get("frame_shift", 0)
-    where = f"shifted by {main} px" if main else "as given"
+    shift, main = fresh.get("shift", 0), report["rule"].get("frame_shifts", [0])
+    where = "as given" if main == [0] else f"on the grids shifted by {', '.join(map(str, main))} px"
     grid = (f", each frame on a pixel grid shifted by {shift} px (`shift:{shift}`: the strided steps read "
             "other pixels of the same scene)" if shift else "")
     out = ["", f"On fresh seeds: the same frames scored again on seeds {a}–{b}{grid}, "

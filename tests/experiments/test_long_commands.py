@@ -24,7 +24,7 @@ COMMANDS = {
     "scenes": ["experiments.real_scenes", "ensemble=20", LONG, "frames=[kitti,oakd_toy]"],
     "video": ["experiments.video", LONG, "sequence.frames=5"],
 }
-ANNOUNCED = {"validate": "validate: 4 frames x 3 candidates, 2 workers, estimated ~",
+ANNOUNCED = {"validate": "validate: 4 frames x 3 candidates x 2 grids, 2 workers, estimated ~",
              "scenes": "scenes: 2 scenes x 1 method(s), estimated ~", "video": "video: 5 frames of 1264x720, estimated ~"}
 
 

@@ -32,15 +32,17 @@ def test_fresh_seeds_score_the_next_seeds_and_decide_the_choice_there(shared_dat
     choice = {"objects.merge": 0.0}
     got = score_fresh_seeds(specs, cfg, {"objects.merge": [0.0]}, {"objects.merge": 0.75}, choice,
                             Path(shared_data))
-    assert got["seeds"] == [5, 6] and got["choice"] == choice and got["shift"] == cfg.fresh_shift == 5
-    # the rates are those of the seeds after the chosen-on ones, on the frames shifted by 5 px, computed
+    # by default the fresh pass reads a grid 3 px beyond the protocol's last (0 and 5 px): 8 px
+    assert got["seeds"] == [5, 6] and got["choice"] == choice and got["shift"] == 8
+    assert got["shift"] == max(cfg.frame_shifts) + cfg.fresh_shift
+    # the rates are those of the seeds after the chosen-on ones, on the frames shifted by 8 px, computed
     # directly
     fresh_base = replace(cfg, seed=5)
     for spec in specs:
         given = load_frame(spec, shared_data)
-        scene = shifted_frame(spec, Path(shared_data), 5)
-        assert scene.disparity.shape == (given.height - 5, given.width - 5)
-        assert torch.equal(scene.disparity, given.disparity[5:, 5:])
+        scene = shifted_frame(spec, Path(shared_data), 8)
+        assert scene.disparity.shape == (given.height - 8, given.width - 8)
+        assert torch.equal(scene.disparity, given.disparity[8:, 8:])
         assert shifted_frame(spec, Path(shared_data), 0).disparity.shape == given.disparity.shape
         cache = SceneCache(spec, scene, fresh_base, ceilings=False)
         for part, ov in (("default", {}), ("in_sample", choice)):
@@ -61,7 +63,7 @@ def test_fresh_seeds_score_the_next_seeds_and_decide_the_choice_there(shared_dat
               "summary": {"datasets": {d: dict(v) for d, v in got["datasets"].items()},
                           "macro_real": dict(got["macro_real"]), "macro_all": dict(got["macro_all"])}}
     md = "\n".join(_fresh_markdown(report))
-    assert "seeds 5–6, each frame on a pixel grid shifted by 5 px (`shift:5`" in md
+    assert "seeds 5–6, each frame on a pixel grid shifted by 8 px (`shift:8`" in md
     assert "chose on seeds 3–4" in md
     assert ("| dataset | default useful | **fresh seeds** | default all-obj | **fresh seeds** | "
             "in-sample useful |") in md
@@ -79,6 +81,7 @@ def test_an_adopted_choice_is_decided_again_on_fresh_seeds_and_its_verdict_says_
     proc = subprocess.run(
         [sys.executable, "-m", "experiments.validate", f"hydra.run.dir={tmp_path}", "ensemble=2", "consensus=1",
          "train.epochs=3", f"frames=[{','.join(gt)}]", f"paths.data_dir={shared_data}", "n_boot=500",
+         "frame_shifts=[0]",
          "~grid", "~neutral", "reduction.tolerance_image=0.1", "+grid={reduction.tolerance_image: [0.015]}",
          "baselines=[]"],
         cwd=ROOT, capture_output=True, text=True, timeout=600)
@@ -101,64 +104,86 @@ def test_an_adopted_choice_is_decided_again_on_fresh_seeds_and_its_verdict_says_
     assert line in proc.stdout + proc.stderr
 
 
-def test_validate_command_reads_the_fresh_seeds_and_skips_them_when_asked(shared_data, tmp_path):
+def test_validate_command_decides_on_two_grids_and_reads_the_fresh_seeds_on_a_third(shared_data, tmp_path):
     args = [sys.executable, "-m", "experiments.validate", "ensemble=2", "train.epochs=3", "n_boot=200",
             f"frames=[{','.join(FRAMES)}]", f"paths.data_dir={shared_data}", "~grid", "~neutral",
-            "baselines=[]"]
+            "baselines=[plane_components]"]
     runs = {}
-    for name, extra in (("on", []), ("off", ["fresh_seeds=false"]),
-                        ("seed2", ["seed=2", "fresh_seeds=false", 'transforms=["shift:5"]']),
-                        ("moved", ["seed=2", "fresh_seeds=false", "frame_shift=5",
-                                   f"scores_out={tmp_path / 'moved.json'}"])):
+    for name, extra in (("on", []), ("off", ["fresh_seeds=false", f"scores_out={tmp_path / 'two.json'}"]),
+                        ("given", ["fresh_seeds=false", "frame_shifts=[0]", 'transforms=["shift:5"]']),
+                        ("seed2", ["seed=2", "fresh_seeds=false", "frame_shifts=[0]",
+                                   'transforms=["shift:8"]', "baselines=[]"])):
         proc = subprocess.run(args + [f"hydra.run.dir={tmp_path / name}"] + extra, cwd=ROOT,
                               capture_output=True, text=True, timeout=600)
         assert proc.returncode == 0, proc.stderr[-2000:]
         runs[name] = (json.loads((tmp_path / name / "validate.json").read_text()), proc.stdout + proc.stderr)
     rep, log_text = runs["on"]
+    assert rep["rule"]["frame_shifts"] == [0, 5]  # the protocol's default grids
+    # each frame's scores are its runs on the frames as given plus its runs on the grid shifted by 5 px
+    # (the shift:5 transform's), the baseline's likewise: the protocol decides on both grids at once
+    given = runs["given"][0]
+    moved = given["robustness"]["shift:5"]
+    for row, one in zip(rep["rows"], given["rows"]):
+        assert row["frame"] == one["frame"]
+        d, sc = row["default"], moved[row["frame"]]
+        assert d["runs"] == 4 and d["useful_hits"] == one["default"]["useful_hits"] + sc["useful_hits"]
+        assert d["all_objects_hits"] == one["default"]["all_objects_hits"] + sc["all_objects_hits"]
+        assert d["x_opt"] == pytest.approx((one["default"]["x_opt"] + sc["x_opt"]) / 2)
+        assert d["n_objects"] == one["default"]["n_objects"]
+        pc = row["baselines"]["plane_components"]
+        assert pc["runs"] == 2
+        assert pc["useful_hits"] == (one["baselines"]["plane_components"]["useful_hits"]
+                                     + sc["baselines"]["plane_components"]["useful_hits"])
+    on0 = rep["grids"]["0"]["macro_real"]
+    assert on0 == pytest.approx(given["summary"]["macro_real"]["default_useful_hits"])
+    assert rep["summary"]["macro_real"]["default_useful_hits"] == pytest.approx(
+        (on0 + rep["grids"]["5"]["macro_real"]) / 2)  # one frame a dataset: the macro is the grids' mean
+    said = (tmp_path / "on" / "validate.md").read_text()
+    assert "Every frame read on the pixel grids shifted by 0, 5 px (`frame_shifts`" in said
+    assert f"0 px: real {100 * on0:.1f} %" in said
     fresh = rep["fresh_seeds"]
     assert fresh["seeds"] == [2, 3] and fresh["confirmed"] is None  # no choice adopted on no grid
-    # the fresh pass's figures are what a run on those seeds reads on the frames shifted by 5 px (one
+    # the fresh pass's figures are what a run on those seeds reads on the frames shifted by 8 px (one
     # frame per dataset: the dataset's rate is its frame's)
-    shifted = runs["seed2"][0]["robustness"]["shift:5"]
+    shifted = runs["seed2"][0]["robustness"]["shift:8"]
     dataset = {f.name: f.dataset for f in frames(names=FRAMES)}
-    assert fresh["shift"] == 5 and set(shifted) == set(FRAMES)
+    assert fresh["shift"] == 8 and set(shifted) == set(FRAMES)
     for name, sc in shifted.items():
         want = sc["useful_hits"] / sc["runs"]
         assert fresh["datasets"][dataset[name]]["default_useful_hits"] == pytest.approx(want)
-    want = (f"on fresh seeds (2-3, grid shifted 5 px): real macro useful-hit rate of the defaults "
+    want = (f"on fresh seeds (2-3, grid shifted 8 px): real macro useful-hit rate of the defaults "
             f"{100 * fresh['macro_real']['default_useful_hits']:.1f} % "
             f"({100 * rep['summary']['macro_real']['default_useful_hits']:.1f} % on the seeds chosen on)")
     assert want in log_text + "".join(p.read_text() for p in (tmp_path / "on").glob("*.log"))
-    assert "On fresh seeds" in (tmp_path / "on" / "validate.md").read_text()
+    assert "On fresh seeds" in said and "of the frames on the grids shifted by 0, 5 px" in said
     off = runs["off"][0]
     assert off["fresh_seeds"] is None
     assert "On fresh seeds" not in (tmp_path / "off" / "validate.md").read_text()
     assert off["summary"] == rep["summary"]  # the fresh pass changes nothing of the main tables
-    # the whole protocol on a shifted grid: its defaults are the shift:5 transform's scores
-    moved = runs["moved"][0]
-    assert moved["rule"]["frame_shift"] == 5
-    assert {r["frame"]: r["default"]["useful_hits"] for r in moved["rows"]} == \
-        {name: sc["useful_hits"] for name, sc in shifted.items()}
-    said = (tmp_path / "moved" / "validate.md").read_text()
-    assert "Every frame read on a pixel grid shifted by 5 px" in said
-    # its scores resume only a run on the same grid
-    with pytest.raises(ValueError, match="frame_shift=5, this run reads frame_shift=0"):
-        evaluate(replace(_cfg(seed=2, fresh_seeds=False), resume=str(tmp_path / "moved.json"),
+    # the scores file keeps each grid's scores apart and resumes only a run on the same grids
+    two = json.loads((tmp_path / "two.json").read_text())
+    assert two["__frame_shifts__"] == [0, 5] and {f"{f}@5" for f in FRAMES} <= set(two)
+    assert two["oakd_toy@5"]["default"]["useful_hits"] == moved["oakd_toy"]["useful_hits"]
+    with pytest.raises(ValueError, match=r"frame_shifts=\[0, 5\], this run reads frame_shifts=\[0\]"):
+        evaluate(replace(_cfg(seed=2, fresh_seeds=False, frame_shifts=[0]), resume=str(tmp_path / "two.json"),
                          paths=replace(_cfg().paths, data_dir=str(shared_data))))
 
 
 def test_a_grid_shift_the_frames_cannot_take_fails_before_any_work(shared_data, tmp_path):
-    for name in ("fresh_shift", "frame_shift"):
-        for bad in (-1, 2.5, True):
-            with pytest.raises(ValueError, match=f"{name}=.*whole number of px, 0 or more"):
+    for name, bads in (("fresh_shift", (-1, 2.5, True)), ("frame_shifts", ([0, -1], [2.5], [True]))):
+        for bad in bads:
+            with pytest.raises(ValueError, match=f"{name}: .*whole number of px, 0 or more"):
                 evaluate(_cfg(**{name: bad}))
+    for bad in ([], [0, 5, 0]):
+        with pytest.raises(ValueError, match=r"frame_shifts=.*give each grid once, at least one"):
+            evaluate(_cfg(frame_shifts=bad))
     # too large for the frames: named by the check that reads every frame before any training (the
     # fresh pass itself, after the main one, would fail with add_junk's message alone)
     cfg = replace(_cfg(fresh_shift=10_000), paths=replace(_cfg().paths, data_dir=str(shared_data)))
-    with pytest.raises(ValueError, match=r"fresh_shift: a shift of 10000 px on frame '\w+'.*half its"):
+    with pytest.raises(ValueError, match=r"fresh_shift: a shift of 10005 px on frame '\w+'.*half its"):
         evaluate(cfg)
-    cfg = replace(cfg, fresh_shift=5, frame_shift=9_995)  # the fresh pass reads both shifts
-    with pytest.raises(ValueError, match=r"frame_shift: a shift of 9995 px on frame '\w+'.*half its shorter"):
+    cfg = replace(cfg, fresh_shift=5, frame_shifts=[0, 9_990])  # checked before the fresh pass (9995 px)
+    with pytest.raises(ValueError, match=r"frame_shifts: a shift of 9990 px on frame '\w+'.*half its"):
         evaluate(cfg)
-    with pytest.raises(ValueError, match=r"frame_shift=5 with an sgbm: transform"):
-        evaluate(replace(cfg, frame_shift=5, transforms=["sgbm:raw"]))
+    with pytest.raises(ValueError, match=r"frame_shifts=\[5\] with an sgbm: transform"):
+        evaluate(replace(cfg, frame_shifts=[5], transforms=["sgbm:raw"]))
