@@ -122,6 +122,10 @@ def _own_fields(module: str) -> list[tuple[str, str, str]]:
             default = "???" if st.value is None else ast.unparse(st.value)
             if default.startswith("field(default_factory="):
                 default = {"list": "[]", "dict": "{}"}.get(default[len("field(default_factory="):-1], default)
+                factory = next((k.value for k in getattr(st.value, "keywords", [])
+                                if k.arg == "default_factory"), None)
+                if isinstance(factory, ast.Lambda):  # `lambda: [0, 5]`: the value it makes
+                    default = ast.unparse(factory.body)
             comment = lines[st.lineno - 1].split("#", 1)[1].strip() if "#" in lines[st.lineno - 1] else ""
             out.append((prefix + name, default, desc.get(name) or comment))
         return out

@@ -101,6 +101,10 @@ def test_help_describes_every_key(module, schema):
     for key in ("data.source", "data.left", "data.right", "data.calibration", "data.frame",
                 "data.disparity_scale", "device"):
         assert key in listed
+    assert "default_factory" not in text  # a list default reads as the list it makes
+    if module == "validate":
+        assert "  frame_shifts=[0, 5]  — " in text
+        assert "  baselines=['plane_components', 'uv_disparity']  — " in text
 
 
 def test_help_names_the_command_that_was_typed():
