@@ -47,13 +47,14 @@ def grid_name(frame: str, shift: int) -> str:
 
 
 def per_grid_macros(table: Any, on_grids: list[SceneCache], shifts: list[int]) -> dict[str, dict[str, float]]:
-    """The defaults' real and all-dataset macro useful-hit rates on each grid alone (``on_grids``:
-    frame by frame, each on every grid of ``shifts``), keyed by the shift: how far apart the grids
-    the protocol sums read the same rule."""
+    """The defaults' useful-hit rates on each grid alone (``on_grids``: frame by frame, each on every
+    grid of ``shifts``), keyed by the shift: the real and all-dataset macros and ``datasets``, the
+    rate per dataset — how far apart the grids the protocol sums read the same rule, and where."""
     out = {}
     for j, shift in enumerate(shifts):
         v = np.array([(r := c.score({}))["useful_hits"] / r["runs"] for c in on_grids[j::len(shifts)]])
-        out[str(shift)] = {"macro_real": table.macro(v, True)[0], "macro_all": table.macro(v, False)[0]}
+        out[str(shift)] = {"macro_real": table.macro(v, True)[0], "macro_all": table.macro(v, False)[0],
+                           "datasets": table.per_dataset(v)}
     return out
 
 

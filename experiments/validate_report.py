@@ -88,10 +88,18 @@ def _grids_lines(report: dict[str, Any]) -> list[str]:
     each = report.get("grids", {})
     per = "; ".join(f"{s} px: real {_pct(each[str(s)]['macro_real'])} %, "
                     f"all {_pct(each[str(s)]['macro_all'])} %" for s in shifts if str(s) in each)
-    return [f"Every frame read on the pixel grids shifted by {', '.join(map(str, shifts))} px "
-            "(`frame_shifts`: the `shift:N` transform, 0 = as given; the strided steps read other pixels of "
-            "the same scenes), a candidate's runs summed over them: the rates below are the means over the grids"
-            + (f" (the defaults' useful-hit macros on each grid alone — {per})" if per else "") + ".", ""]
+    out = [f"Every frame read on the pixel grids shifted by {', '.join(map(str, shifts))} px "
+           "(`frame_shifts`: the `shift:N` transform, 0 = as given; the strided steps read other pixels of "
+           "the same scenes), a candidate's runs summed over them: the rates below are the means over the "
+           "grids" + (f" (the defaults' useful-hit macros on each grid alone — {per})" if per else "") + ".", ""]
+    names = list(each[str(shifts[0])].get("datasets", {})) if str(shifts[0]) in each else []
+    if names and all(str(s) in each for s in shifts):  # where the grids part: the defaults per dataset
+        out += ["The defaults' useful hits (% of runs) per dataset on each grid alone:", "",
+                "| dataset | " + " | ".join(f"{s} px" for s in shifts) + " |", "|---|" + "---|" * len(shifts)]
+        out += [f"| {d} | " + " | ".join(_pct(each[str(s)]["datasets"][d]) for s in shifts) + " |"
+                for d in names]
+        out.append("")
+    return out
 
 
 def to_markdown(report: dict[str, Any]) -> str:

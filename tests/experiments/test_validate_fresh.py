@@ -141,6 +141,13 @@ def test_validate_command_decides_on_two_grids_and_reads_the_fresh_seeds_on_a_th
     said = (tmp_path / "on" / "validate.md").read_text()
     assert "Every frame read on the pixel grids shifted by 0, 5 px (`frame_shifts`" in said
     assert f"0 px: real {100 * on0:.1f} %" in said
+    for d, x in given["summary"]["datasets"].items():  # each grid per dataset: as given, and shifted 5 px
+        assert rep["grids"]["0"]["datasets"][d] == pytest.approx(x["default_useful_hits"])
+        five = [moved[r["frame"]] for r in given["rows"] if r["dataset"] == d]
+        assert rep["grids"]["5"]["datasets"][d] == pytest.approx(
+            sum(m["useful_hits"] / m["runs"] for m in five) / len(five))
+        assert (f"| {d} | {100 * x['default_useful_hits']:.1f} | "
+                f"{100 * rep['grids']['5']['datasets'][d]:.1f} |") in said
     fresh = rep["fresh_seeds"]
     assert fresh["seeds"] == [2, 3] and fresh["confirmed"] is None  # no choice adopted on no grid
     # the fresh pass's figures are what a run on those seeds reads on the frames shifted by 8 px (one
