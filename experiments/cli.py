@@ -53,13 +53,39 @@ def _finite(v: Any, text: str) -> bool:
     return True
 
 
-def _value_error(key: str, value: str, t: Any) -> str | None:
-    """A one-line complaint when ``value`` cannot be a ``t`` (int / float / bool, optionally None)."""
+def _list_error(key: str, value: str, t: Any, optional: bool) -> str | None:
+    """A one-line complaint when ``value`` cannot be a ``t`` (``list[...]``): not a list at all
+    (``frame_shifts=5``), or not whole numbers in a ``list[int]``; Hydra's own message is several
+    lines. Interpolations, sweeps and what YAML cannot read are left to Hydra."""
     import yaml
 
+    text = value.strip()
+    if text.startswith(("${", "choice(", "range(", "glob(", "interval(")) or (optional and text == "null"):
+        return None
+    try:
+        v = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return None
+    if not isinstance(v, list):
+        return f"{key}={value}: expected a list, e.g. {key}=[{value}]" + (" or null" if optional else "")
+    item = (typing.get_args(t) or (Any,))[0]
+    if item is int and not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
+        return f"{key}={value}: expected a list of whole numbers"
+    return None
+
+
+def _value_error(key: str, value: str, t: Any) -> str | None:
+    """A one-line complaint when ``value`` cannot be a ``t`` (int / float / bool, optionally None;
+    a list, :func:`_list_error`)."""
+    import yaml
+
+    if typing.get_origin(t) is list:  # (its args are the item type's)
+        return _list_error(key, value, t, False)
     args = typing.get_args(t)
     optional = type(None) in args
     base = next((a for a in args if a is not type(None)), t) if args else t
+    if typing.get_origin(base) is list:  # Optional[list[...]]
+        return _list_error(key, value, base, optional)
     if base not in (int, float, bool) or "(" in value or "[" in value:  # sweep functions, lists: Hydra's
         return None
     for part in value.split(","):  # a sweep lists several values

@@ -56,7 +56,8 @@ def test_every_composed_key_is_known(name, schema):
             if isinstance(v, dict) and v:
                 walk(v, f"{prefix}{k}.")
             else:
-                flat.append(f"{prefix}{k}={json.dumps(v) if not isinstance(v, (list, dict)) else 0}")
+                # (a list as a list: its value is checked too)
+                flat.append(f"{prefix}{k}={json.dumps(v) if not isinstance(v, dict) else 0}")
 
     walk(OmegaConf.to_container(cfg, resolve=False))
     assert check_overrides(flat, schema) is None
@@ -147,6 +148,23 @@ def test_help_does_not_import_torch():  # what makes it instant (0.17 s here aga
 def test_values_of_the_wrong_type_are_named(args, expect):
     err = check_overrides(args, RunConfig)
     assert err is not None and expect in err
+
+
+def test_a_list_key_given_no_list_is_named_in_one_line():
+    """Hydra's own message for a scalar given to a list key is five lines; ours is one."""
+    from experiments.validate import ValidateConfig
+
+    for arg in ("frame_shifts=5", "transforms=flip"):
+        key, value = arg.split("=")
+        assert check_overrides([arg], ValidateConfig) == f"{arg}: expected a list, e.g. {key}=[{value}]"
+    assert check_overrides(["datasets=oakd"], ValidateConfig) == (
+        "datasets=oakd: expected a list, e.g. datasets=[oakd] or null")
+    for arg in ("frame_shifts=[a]", "frame_shifts=[0, 2.5]", "frame_shifts=[true]"):
+        assert check_overrides([arg], ValidateConfig) == f"{arg}: expected a list of whole numbers"
+    # what Hydra reads as a list passes
+    assert check_overrides(["frame_shifts=[0]", "frame_shifts=[0,5]", "transforms=[]",
+                            'transforms=["shift:5"]', "datasets=null", "frames=[kitti,oakd_toy]",
+                            "baselines=[]"], ValidateConfig) is None
 
 
 def test_values_of_the_right_type_pass():

@@ -30,6 +30,8 @@ SCHEMAS = [RunConfig, StudyConfig, ValidateConfig, VideoConfig, ScenesConfig, Sy
 def _numeric_keys(schema: type) -> list[str]:
     keys = []
     for key, t in field_types(schema).items():
+        if typing.get_origin(t) is list:  # a list of numbers (frame_shifts): not a number
+            continue
         args = typing.get_args(t)
         base = next((a for a in args if a is not type(None)), t) if args else t
         if base in (int, float):
