@@ -170,8 +170,8 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
             if cfg.fresh_seeds:  # the defaults once more on the next seeds (score_fresh_seeds)
                 yield shift_checked(given, spec, max(shifts) + cfg.fresh_shift, "fresh_shift"), base, 1
 
-    what = f"{len(specs)} frames x {len(keys)} candidates" + (f" x {len(shifts)} grids" if len(shifts) > 1
-                                                              else "")
+    on_more = f" x {len(shifts)} grids" if len(shifts) > 1 else ""
+    what = f"{len(specs)} frames x {len(keys)} candidates{on_more}"
     est = check_resources(jobs(), cfg.resources, f"validation over {what}")
     announce("validate", what + (f", {cfg.workers} workers" if cfg.workers > 1 else ""),
              est.seconds / max(1, min(cfg.workers, len(specs))))
@@ -183,10 +183,10 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     progress = frames_progress(len(specs) * len(shifts))
     on_grids = [SceneCache(s, None, base, loader=partial(shifted_frame, s, data_dir, shift))
                 for s in specs for shift in shifts]  # frame by frame, each on every grid
+    names = [grid_name(s.name, shift) for s in specs for shift in shifts]  # their keys in a scores file
     todo = []
     for i, c in enumerate(on_grids):
-        # what an earlier run scored is not scored again
-        c.scores = dict(resumed.get(grid_name(c.spec.name, shifts[i % len(shifts)]), {}))
+        c.scores = dict(resumed.get(names[i], {}))  # what an earlier run scored is not scored again
         if all(_key(ov) in c.scores for ov, _ in keys):
             progress.update(1)
         else:
@@ -196,8 +196,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     score_caches(on_grids, missing, cfg.workers, runs_log, progress)
     if cfg.scores_out:  # the per-frame scores, so that a later run can resume from them
         Path(cfg.scores_out).parent.mkdir(parents=True, exist_ok=True)
-        out: dict[str, Any] = {grid_name(c.spec.name, shifts[i % len(shifts)]): c.scores
-                               for i, c in enumerate(on_grids)}
+        out: dict[str, Any] = {n: c.scores for n, c in zip(names, on_grids)}
         if shifts != [0]:  # scores of shifted frames resume only a run on the same grids
             out[SHIFT_KEY] = shifts
         Path(cfg.scores_out).write_text(json.dumps(out))
@@ -239,8 +238,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
                 kn["verdict"] += " (not confirmed on fresh seeds)"
     from .validate_baselines import score_baselines, summarize_baselines
 
-    per_grid = score_baselines(on_grids, cfg.baselines, cfg.reduction, [grid_name(c.spec.name, shifts[i % len(
-        shifts)]) for i, c in enumerate(on_grids)])
+    per_grid = score_baselines(on_grids, cfg.baselines, cfg.reduction, names)
     for row, c in zip(rows, caches):
         row["baselines"] = {n: merge_scores([per_grid[grid_name(c.spec.name, s)][n] for s in shifts])
                             for n in cfg.baselines}

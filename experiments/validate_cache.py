@@ -137,8 +137,8 @@ class GridCache:
     """One frame read on several pixel grids (``validate``'s ``frame_shifts``): a :class:`SceneCache`
     per grid, and a candidate's scores summed over them (:func:`merge_scores`) — the frame's runs on
     two grids count as twice the seeds would, so the protocol's per-frame rate is the mean over the
-    grids and a choice is decided on every grid at once. The picture, the transforms and the
-    baselines' pictures read the first grid's frame (:attr:`scene`)."""
+    grids and a choice is decided on every grid at once. The gallery's picture and the transforms
+    read the first grid's frame (:attr:`scene`); the baselines run on each grid's own."""
 
     def __init__(self, grids: list[SceneCache]) -> None:
         self.grids = grids
