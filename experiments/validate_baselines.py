@@ -40,6 +40,8 @@ def score_baselines(caches: list[Any], names: list[str], reduction: Any,
     keyed by ``keys`` (default: the frames' names; one frame on several grids has a key per grid);
     a baseline that does not apply to a frame (no metric camera) gets None."""
     out: dict[str, dict[str, Any]] = {}
+    if not names:  # nothing to run: no frame read, no log line
+        return {key: {} for key in keys or [c.spec.name for c in caches]}
     for c, key in zip(caches, keys or [c.spec.name for c in caches]):
         # (the scene is not kept: 352 frames' maps would stay in memory)
         out[key] = per = baseline_counts(c.fresh_scene(), names, reduction, c.spec.camera)
