@@ -193,6 +193,7 @@ def worker_pool(workers: int, initializer: Callable[..., Any] | None = None,
         yield pool
     except BaseException:
         procs = list((getattr(pool, "_processes", None) or {}).values())  # no public handle on them
+        manager = getattr(pool, "_executor_manager_thread", None)  # shutdown() forgets it
         pool.shutdown(wait=False, cancel_futures=True)
         for p in procs:
             if p.is_alive():
@@ -202,5 +203,10 @@ def worker_pool(workers: int, initializer: Callable[..., Any] | None = None,
             if p.is_alive():
                 p.kill()
                 p.join()
+        # the pool's manager thread closes its wake-up pipe once it sees the dead workers; were it
+        # still running at exit, the interpreter's wake-up call could race that close and print
+        # "Exception ignored ... Bad file descriptor" (CPython 3.11): let it finish first
+        if manager is not None:
+            manager.join(10)
         raise
     pool.shutdown(wait=True)

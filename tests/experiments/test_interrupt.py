@@ -107,6 +107,27 @@ except interrupt.Interrupted as e:
     assert out.stdout.strip() == "stopped by SIGTERM"
 
 
+def test_a_pool_ended_by_an_error_leaves_no_thread_and_prints_nothing_at_exit():
+    # its manager thread, still closing its wake-up pipe at exit, raced the interpreter's own
+    # wake-up call: "Exception ignored ... Bad file descriptor" under a one-line interruption (CI)
+    code = """
+import threading, time
+from somtorch.interrupt import worker_pool
+try:
+    with worker_pool(2) as pool:
+        pool.submit(time.sleep, 30)
+        raise RuntimeError("stop")
+except RuntimeError:
+    pass
+print(sorted(t.name for t in threading.enumerate() if t is not threading.main_thread() and not t.daemon))
+"""
+    for _ in range(3):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                             cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+        assert out.returncode == 0 and out.stderr == "", out.stderr
+        assert out.stdout.strip() == "[]"
+
+
 def test_a_signal_inside_a_weakref_callback_is_not_printed_and_stops_at_the_next_checkpoint():
     # the CI flake of session 19: SIGINT landed in importlib's module-lock weakref callback, where
     # Python only reports exceptions ("Exception ignored in ..." and a traceback on stderr) and the
