@@ -7,7 +7,7 @@ get right in most runs still loses some of them to a map that chained the object
 neighbours, or split it. Those losing maps rarely agree with each other, while the maps that find
 the object keep nearly the same pixels; the medoid of several maps therefore follows the majority
 where there is one, and costs ``K`` trainings and object steps per run (each some milliseconds to a
-few tens of them on a 640 × 480 map: docs/validation.md, session 34).
+few tens of them on a 640 × 480 map: docs/validation_log.md, session 34).
 
 Map ``k`` of the run seeded ``s`` is seeded ``(s + k · SEED_STRIDE) mod 2³²`` (torch's CPU generator
 reads 32 bits of a seed; map 0 is the run's own seed: ``consensus=1`` is the plain pipeline, bit for

@@ -96,9 +96,13 @@ def test_the_site_builds_offline_with_zero_warnings(tmp_path):
         assert f"gallery/{png.name}" in pictures and (site / "gallery" / png.name).is_file(), png.name
     # the guides and the four documents are pages of the site
     guides = [f"guides/{p.stem}.html" for p in (ROOT / "docs" / "guides").glob("*.md")]
-    for page in ("index.html", *guides, "validation.html", "method.html", "results.html", "tuned_constants.html",
-                 "scaling.html", "reliability.html", "synth.html", "log.html"):
+    for page in ("index.html", *guides, "validation.html", "validation_log.html", "method.html", "results.html",
+                 "tuned_constants.html", "scaling.html", "reliability.html", "synth.html", "log.html"):
         assert page in html, page
+    # the validation page leads with today's figures; the sessions' record is a page of its own
+    assert "Today&rsquo;s figures" in html["validation.html"] or "Today's figures" in html["validation.html"]
+    assert 'id="session-41-issue-31' in html["validation_log.html"]
+    assert 'id="session-41-issue-31' not in html["validation.html"]
 
 
 @pytest.mark.slow

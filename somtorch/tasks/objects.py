@@ -28,7 +28,7 @@ Linking and selection follow ``AreaConfig.rule``:
   :func:`~somtorch.tasks.detect.kept_areas` measures: :func:`rank_score`); on a map whose support
   plane was verified and cut (``on_support``: what
   is left stands on it) by size × nearness, ``area_frac ×`` mean disparity — the biggest nearest
-  thing on the support, the ``plane_components`` baseline's choice (session 17, docs/validation.md).
+  thing on the support, the ``plane_components`` baseline's choice (session 17, docs/validation_log.md).
 
 What happens to the selected areas afterwards (joining adjacent segments, box refinement, growing,
 the purity test) is in :mod:`somtorch.tasks.refine`; :func:`~somtorch.tasks.detect.kept_areas` runs

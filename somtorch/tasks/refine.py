@@ -109,7 +109,7 @@ def with_grown_contrast(areas: list[ObjectArea], stats: NeuronStats, cfg: AreaCo
     the refinement would keep of it. The salient ranking reads it beside the area's own contrast
     (:func:`~somtorch.tasks.objects.rank_score`): an area beside an object, a table's front strip, whose
     growth swallows the object and the surface around it, stands out less once grown than the object's
-    own area does (session 31, ``docs/validation.md``). ``areas`` as they are where ``cfg.merge`` is 0."""
+    own area does (session 31, ``docs/validation_log.md``). ``areas`` as they are where ``cfg.merge`` is 0."""
     if cfg.merge <= 0 or not areas:
         return areas
     group = torch.zeros(len(areas), int(stats.count.shape[0]), dtype=torch.bool)
