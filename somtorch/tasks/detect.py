@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import torch
 
@@ -158,7 +159,9 @@ def first_place(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tenso
     if cfg.rule == "paper":
         return useful(kept_areas(standing, stats, labels, cfg, ctx))
     order = salient_order(standing, cfg, on_support=ctx.islands is not None)  # (before the grown contrast)
-    return any(useful(kept_areas(standing, stats, labels, cfg, ctx, try_first=a.neurons)) for a in order)
+    memo: dict = {}  # each try joins and refines mostly the same candidates: once each (session 42)
+    return any(useful(kept_areas(standing, stats, labels, cfg, ctx, try_first=a.neurons, memo=memo))
+               for a in order)
 
 
 def _window(box: tuple[int, int, int, int], shape: tuple[int, ...], margin: int
@@ -226,9 +229,29 @@ def _refined(joined: ObjectArea, part: torch.Tensor, labels: torch.Tensor, win: 
                    solidity_rel=solid / ctx.solidity, confidence=confidence)
 
 
+def _refined_parts(joined: ObjectArea, labels: torch.Tensor, square: int, confidence: float, cfg: AreaConfig,
+                   ctx: MapContext) -> list[ObjectArea]:
+    """The parts of ``joined`` (:func:`_parts`), each refined (:func:`_refined`): what
+    :func:`kept_areas` checks of a candidate once it is joined."""
+    # every check reads the window of the area's segments (their box, widened by half the
+    # opening's square where the map goes on), not the whole map: the same result
+    win, origin = _window(joined.box, labels.shape, square // 2 + 1)
+    own = label_mask(labels[win], joined.neurons)  # refine_box moves the box, not the neurons
+    residual = None if ctx.ground_residual is None else ctx.ground_residual[win]
+    uncut = None if ctx.uncut is None else ctx.uncut[win]
+    return [_refined(joined, part, labels, win, origin, residual, square, confidence, cfg, ctx)
+            for part in _parts(own, uncut, cfg.box_coverage, residual, ctx.clutter_band)]
+
+
+def _memo_key(area: ObjectArea) -> tuple:
+    """Every field of ``area`` (its neurons as a tuple): two joined areas with the same key refine
+    to the same parts."""
+    return tuple(tuple(v) if isinstance(v, list) else v for v in vars(area).values())
+
+
 def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor, cfg: AreaConfig,
                ctx: MapContext, *, trace: list[Candidate] | None = None,
-               try_first: list[int] | None = None) -> list[ObjectArea]:
+               try_first: list[int] | None = None, memo: dict | None = None) -> list[ObjectArea]:
     """Select, join, refine and check the candidates in rank order.
 
     Each candidate is joined with its adjacent segments (:func:`merge_adjacent`, never with segments of
@@ -255,6 +278,10 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
     ``try_first``: the neurons of one of ``areas`` to try first, whatever its rank (an analysis of the
     ranking: :func:`first_place`); the others follow in rank order, ``cfg.max_areas`` in all. Not
     used under ``rule="paper"``, which keeps one area.
+
+    ``memo``: a dict shared by calls on the same ``areas``, ``stats``, ``labels``, ``cfg`` and ``ctx``
+    (:func:`first_place`'s tries): a candidate's join and refined parts, which depend on nothing
+    else but the segments kept before it, are computed once per such state (the same result).
 
     Shape:
         ``labels`` ``(H, W)``.
@@ -285,18 +312,21 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             verdicts.append(("not tried: some of its segments went into an area kept before it", "not tried"))
             continue
         confidence = rank_score(cand, cfg, on_support=on_support) / best if best > 0 else 1.0
-        joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
-                                exclude=taken)[0]
-        # every check reads the window of the area's segments (their box, widened by half the
-        # opening's square where the map goes on), not the whole map: the same result
-        win, origin = _window(joined.box, labels.shape, square // 2 + 1)
-        own = label_mask(labels[win], joined.neurons)  # refine_box moves the box, not the neurons
+        join = partial(merge_adjacent, [cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
+                       exclude=taken)
+        if memo is None:
+            joined = join()[0]
+            refined = _refined_parts(joined, labels, square, confidence, cfg, ctx)
+        else:  # the join depends on the segments kept before; the refinement on the joined area alone
+            key = ("join", tuple(cand.neurons), taken.numpy().tobytes())
+            joined = memo[key] if key in memo else memo.setdefault(key, join()[0])
+            key = ("parts", _memo_key(joined))
+            if key not in memo:
+                memo[key] = _refined_parts(joined, labels, square, confidence, cfg, ctx)
+            refined = [replace(d, confidence=confidence) for d in memo[key]]
         any_kept = False
-        residual = None if ctx.ground_residual is None else ctx.ground_residual[win]
         outcomes = []
-        for part in _parts(own, None if ctx.uncut is None else ctx.uncut[win], cfg.box_coverage, residual,
-                           ctx.clutter_band):
-            done = _refined(joined, part, labels, win, origin, residual, square, confidence, cfg, ctx)
+        for done in refined:
             if first is None:
                 first = done
             if done.purity < cfg.min_purity:

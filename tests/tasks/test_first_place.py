@@ -62,3 +62,53 @@ def test_first_place_tries_the_candidates_in_rank_order_until_one_is_useful():
     # the paper's rule keeps its one nearest area: nothing to reorder
     assert first_place(areas, stats, labels, AreaConfig(rule="paper"), ctx,
                        lambda kept: [a.neurons for a in kept] == [[2]])
+
+
+def _members(scene, cfg):
+    """The object step's inputs of every member of one run of ``cfg`` on ``scene``, as
+    :func:`somtorch.pipeline.detect` builds them: (areas, stats, labels, ctx, object config)."""
+    from somtorch.pipeline import find_objects, object_setup, on_support, prepare, read_map, segment_runs
+
+    scene, _, sigma = read_map(scene, cfg)
+    _, ground, usable, feats, train = prepare(scene, cfg, sigma=sigma)
+    seg = next(segment_runs(feats, train, on_support(scene, ground, cfg.features)[0], usable, cfg))
+    setup = object_setup(scene, seg.labels, ground, cfg)
+    st, ctx = setup.stride, setup.ctx
+    labels = seg.labels[:, ::st, ::st].contiguous()
+    for e in range(labels.shape[0]):
+        found = find_objects(labels[e], seg.ref_disparity[e], seg.grid_d2, ctx, setup.ocfg)
+        yield found.areas, found.stats, labels[e], ctx, setup.ocfg
+
+
+@pytest.mark.parametrize("which, merge", [("motorcycle", 0.75), ("motorcycle", 0.0), ("floor", 0.75)])
+def test_the_memo_of_the_tries_changes_nothing(tmp_path, which, merge):
+    # first_place shares one memo between its tries (session 42: the ceiling 23 % faster): every
+    # candidate tried first keeps the same areas, field for field, with and without it — on the
+    # contrast rule's map (Motorcycle, with and without merge) and on a support-verified floor
+    from dataclasses import replace
+
+    from somtorch.config import PipelineConfig
+    from somtorch.disparity import load_scene
+    from somtorch.synth import generate_frame, write_frame
+    from somtorch.tasks.detect import salient_order, standing_areas
+
+    if which == "motorcycle":
+        scene = load_scene("motorcycle")
+    else:
+        scene = load_scene(write_frame(generate_frame("floor", 1, "middlebury", scale=0.5), tmp_path / "f"))
+    cfg = PipelineConfig(ensemble=3, consensus=1)
+    cfg = replace(cfg, objects=replace(cfg.objects, merge=merge))  # 0: merge_adjacent returns the area itself
+    tries = 0
+    on_support = []
+    for areas, stats, labels, ctx, ocfg in _members(scene, cfg):
+        standing = [replace(a) for a in standing_areas(areas, labels, stats, ctx)]
+        on_support.append(ctx.islands is not None)
+        memo: dict = {}
+        for a in salient_order(standing, ocfg, on_support=ctx.islands is not None):
+            plain = kept_areas([replace(b) for b in standing], stats, labels, ocfg, ctx, try_first=a.neurons)
+            shared = kept_areas(standing, stats, labels, ocfg, ctx, try_first=a.neurons, memo=memo)
+            assert shared == plain, a.neurons
+            tries += 1
+        assert any(k[0] == "parts" for k in memo)
+    assert tries >= 6
+    assert all(on_support) == (which == "floor")
