@@ -82,7 +82,7 @@ def _members(scene, cfg):
 
 @pytest.mark.parametrize("which, merge", [("motorcycle", 0.75), ("motorcycle", 0.0), ("floor", 0.75)])
 def test_the_memo_of_the_tries_changes_nothing(tmp_path, which, merge):
-    # first_place shares one memo between its tries (session 42: the ceiling 23 % faster): every
+    # first_place shares one memo between its tries (session 42: the ceiling about a fifth faster): every
     # candidate tried first keeps the same areas, field for field, with and without it — on the
     # contrast rule's map (Motorcycle, with and without merge) and on a support-verified floor
     from dataclasses import replace
