@@ -39,10 +39,11 @@ def score_baselines(caches: list[Any], names: list[str], reduction: Any,
     """``{frame: {baseline: counts}}`` for every frame cache (``experiments.validate_cache.SceneCache``),
     keyed by ``keys`` (default: the frames' names; one frame on several grids has a key per grid);
     a baseline that does not apply to a frame (no metric camera) gets None."""
-    out: dict[str, dict[str, Any]] = {}
+    keys = keys or [c.spec.name for c in caches]
     if not names:  # nothing to run: no frame read, no log line
-        return {key: {} for key in keys or [c.spec.name for c in caches]}
-    for c, key in zip(caches, keys or [c.spec.name for c in caches]):
+        return {key: {} for key in keys}
+    out: dict[str, dict[str, Any]] = {}
+    for c, key in zip(caches, keys):
         # (the scene is not kept: 352 frames' maps would stay in memory)
         out[key] = per = baseline_counts(c.fresh_scene(), names, reduction, c.spec.camera)
         log.info("%s: baselines %s", key, ", ".join(

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import partial
 
 import torch
 
@@ -312,14 +311,17 @@ def kept_areas(areas: list[ObjectArea], stats: NeuronStats, labels: torch.Tensor
             verdicts.append(("not tried: some of its segments went into an area kept before it", "not tried"))
             continue
         confidence = rank_score(cand, cfg, on_support=on_support) / best if best > 0 else 1.0
-        join = partial(merge_adjacent, [cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
-                       exclude=taken)
+        # memo: the join depends on the segments kept before it, the refinement on the joined area alone
+        key = None if memo is None else ("join", tuple(cand.neurons), taken.numpy().tobytes())
+        joined = None if key is None else memo.get(key)
+        if joined is None:
+            joined = merge_adjacent([cand], stats, ratio=cfg.merge, min_boundary=cfg.min_boundary,
+                                    exclude=taken)[0]
+            if key is not None:
+                memo[key] = joined
         if memo is None:
-            joined = join()[0]
             refined = _refined_parts(joined, labels, square, confidence, cfg, ctx)
-        else:  # the join depends on the segments kept before; the refinement on the joined area alone
-            key = ("join", tuple(cand.neurons), taken.numpy().tobytes())
-            joined = memo[key] if key in memo else memo.setdefault(key, join()[0])
+        else:  # copies, with this try's confidence: what a try keeps is its own
             key = ("parts", _memo_key(joined))
             if key not in memo:
                 memo[key] = _refined_parts(joined, labels, square, confidence, cfg, ctx)
