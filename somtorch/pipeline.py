@@ -259,7 +259,8 @@ def detect(scene: Scene, seg: Segmentation, ground: GroundPlane | None, cfg: Pip
         if setup is None or not setup.serves(seg.labels):
             setup = object_setup(scene, seg.labels, ground, cfg)
         st, ocfg, ctx, integral = setup.stride, setup.ocfg, setup.ctx, setup.integral
-        labels = seg.labels if st == 1 else seg.labels[:, ::st, ::st].contiguous()
+        # the object step reads int64 labels: a map held as int16 is widened on its grid alone
+        labels = (seg.labels if st == 1 else seg.labels[:, ::st, ::st]).long().contiguous()
     scene, obj_mask, x_opt = setup.scene, setup.obj_mask, setup.x_opt
     h, w = scene.disparity.shape
     r = cfg.reduction
@@ -310,22 +311,21 @@ def detect_runs(scene: Scene, segs: Iterable[Segmentation], ground: GroundPlane 
     """:func:`detect` on each map of :func:`segment_runs`; with several maps per run, each run keeps
     the map of the consensus (:func:`somtorch.consensus.choose`). Returns the kept maps as one
     segmentation and their member results. ``segs`` may hold their labels as int16 (a cache of
-    them, :func:`~somtorch.consensus.compact`): the object step reads them widened to int64, and a
-    map waiting for the consensus is held as int16 (a map has far fewer segments); the kept labels
-    come back as int64."""
+    them, :func:`~somtorch.consensus.compact`): the object step widens to int64 only the grid it
+    reads (:func:`detect`), and a map waiting for the consensus is held as int16 (a map has far fewer
+    segments); the kept labels come back as int64."""
     held, per_map = [], []
     setup = None
     for s in segs:
-        wide = s if s.labels.dtype == torch.long else replace(s, labels=s.labels.long())
         if setup is None:  # once per run: every map segments the same pixels (detect checks)
             with (timer or _Timer())("objects"):
-                setup = object_setup(scene, wide.labels, ground, cfg)
-        per_map.append(detect(scene, wide, ground, cfg, timer, first_place_ceiling=first_place_ceiling,
+                setup = object_setup(scene, s.labels, ground, cfg)
+        per_map.append(detect(scene, s, ground, cfg, timer, first_place_ceiling=first_place_ceiling,
                               warn=cfg.maps == 1, setup=setup))
         if cfg.maps == 1:
-            return wide, per_map[0]
+            return (s if s.labels.dtype == torch.long else replace(s, labels=s.labels.long())), per_map[0]
         held.append(compact(s))  # (a held int16 map is kept as it is, not copied)
-        del s, wide  # not alive while the next set of maps is trained and labelled
+        del s  # not alive while the next set of maps is trained and labelled
     with (timer or _Timer())("objects"):  # the consensus is step 1c's choice among the maps
         chosen, members = choose(per_map)
     warn_fallbacks(scene.name, members)

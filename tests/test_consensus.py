@@ -167,3 +167,24 @@ def test_the_summary_picture_names_the_kept_map(scene, runs):
     fig = draw_summary(scene, alone[0], 0)
     assert "kept (agreement" not in fig._suptitle.get_text()
     plt.close(fig)
+
+
+@pytest.mark.parametrize("maps", [1, K])
+def test_maps_held_as_int16_give_the_same_runs_as_int64_maps(scene, maps):
+    """What validate's cache holds (:func:`~somtorch.consensus.compact`): the object step widens only
+    the grid it reads, and the kept labels come back as int64 either way."""
+    from somtorch.consensus import compact
+    from somtorch.pipeline import detect_runs, on_support, prepare, read_map, segment_runs
+
+    cfg = _cfg(consensus=maps)
+    read, _, sigma = read_map(scene, cfg)
+    _, ground, usable, feats, train = prepare(read, cfg, sigma=sigma)
+    wide = list(segment_runs(feats, train, on_support(read, ground, cfg.features)[0], usable, cfg))
+    small = [compact(s) for s in wide]
+    assert {s.labels.dtype for s in small} == {torch.int16} and {s.labels.dtype for s in wide} == {torch.long}
+    seg_w, runs_w = detect_runs(read, wide, ground, cfg)
+    seg_s, runs_s = detect_runs(read, small, ground, cfg)
+    assert seg_s.labels.dtype == torch.long and torch.equal(seg_s.labels, seg_w.labels)
+    for a, b in zip(runs_s, runs_w, strict=True):
+        assert [x.box for x in a.kept] == [x.box for x in b.kept] and a.consensus_map == b.consensus_map
+        assert torch.equal(a.reduction.mask, b.reduction.mask) and a.score == b.score
