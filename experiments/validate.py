@@ -49,7 +49,7 @@ from omegaconf import DictConfig
 from . import CONF
 from .schema import RunConfig, register
 from .validate_cache import (UPSTREAM, GridCache, Protocol, SceneCache, _default_of, _key, _overrides,
-                             frames_progress, merge_scores, scorable, score_caches)
+                             frames_progress, merge_scores, scorable, score_caches, score_missing)
 from .validate_fresh import (SHIFT_KEY, check_shifts, grid_name, per_grid_macros, score_fresh_seeds,
                              shift_checked, shifted_frame)
 from .validate_report import gallery, summarize, to_markdown, verdict
@@ -204,10 +204,9 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     caches = [GridCache(on_grids[i:i + len(shifts)]) for i in range(0, len(on_grids), len(shifts))]
     log.info("%d frames scored with %d candidates on %d grid(s) in %.0f s", len(caches), len(keys),
              len(shifts), time.perf_counter() - t0)
-    proto = Protocol(caches, cfg, grid, defaults)
+    proto = Protocol(caches, cfg, grid, defaults, runs_log)
     in_sample, in_sample_steps = proto.choose()
-    for c in caches:
-        c.score(in_sample, saliency=True)
+    score_missing(caches, in_sample, True, cfg.workers, runs_log)  # its saliency, in the workers
     # left-out: each dataset scored with the choice made on all the others
     folds = {}
     for d in proto.table.names:
@@ -245,6 +244,7 @@ def evaluate(cfg: ValidateConfig, runs_log: Path | None = None) -> dict[str, Any
     if cfg.gallery is not None:
         for c in caches:
             gallery(c, Path(to_absolute_path(cfg.gallery)) / f"{c.spec.name}.png")
+            c.release()  # (the picture's segmentation: one frame's at a time)
     robustness = {t: transformed(caches, t, cfg.baselines, cfg.reduction, data_dir) for t in cfg.transforms}
     return {"grid": grid, "defaults": defaults, "neutral": dict(cfg.neutral), "in_sample_choice": in_sample,
             "in_sample_steps": in_sample_steps, "folds": folds, "rows": rows, "summary": summary, "knobs": knobs,

@@ -206,6 +206,30 @@ def test_scene_cache_segments_once_per_upstream_setting(shared_data):
     assert 0 <= sal["f_measure"] <= 1 and 0 <= sal["mae"] <= 1 and 0 <= sal["s_measure"] <= 1
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_candidate_scored_on_demand_leaves_no_segmentation_in_the_parent(shared_data, workers):
+    """The protocol's greedy join asks for a candidate nobody scored up front: it is scored as the
+    others were (in the workers), and the parent's caches keep its scores only — one segmentation
+    kept per frame and grid outgrew 24 GiB on the corpus (session 43)."""
+    from functools import partial
+    from types import SimpleNamespace
+
+    from experiments.validate_cache import GridCache, Protocol
+    from experiments.validate_fresh import shifted_frame
+
+    specs, shifts, base = frames(names=["kitti", "eth3d_terrace"]), (0, 5), PipelineConfig(ensemble=2)
+    caches = [GridCache([SceneCache(s, None, base, loader=partial(shifted_frame, s, shared_data, sh),
+                                    ceilings=False) for sh in shifts]) for s in specs]
+    proto = Protocol(caches, SimpleNamespace(n_boot=200, seed=0, loss_margin=10.0, ni_margin=2.0,
+                                             workers=workers), {}, {})
+    cand = {"ground.max_below_frac": 1.0, "objects.merge": 0.5}  # a segmentation of its own
+    rates = proto.rates(cand)
+    assert all(not g._seg and g.labels is None and g._scene is None for c in caches for g in c.grids)
+    ref = [[SceneCache(s, shifted_frame(s, shared_data, sh), base, ceilings=False).score(cand)
+            for sh in shifts] for s in specs]
+    assert rates.tolist() == [sum(r["useful_hits"] for r in f) / sum(r["runs"] for r in f) for f in ref]
+
+
 def test_scene_cache_reads_a_noisy_frame_through_the_median_as_run_pipeline_does():
     """The protocol scores what the pipeline runs: a dense sensor's noisy frame is segmented and
     its object step run on the median-filtered map (features.median), in the cache as in
