@@ -17,7 +17,7 @@ from . import CONF  # the clone's conf/, or the one shipped in the wheel
 USAGE = {
     "run": "the whole pipeline on one scene (outputs/run/<scene>/<time>/)",
     "study": "paper studies and sweeps (Table 1/2, runtime, stability; -m for sweeps)",
-    "validate": "leave-one-scene-out validation of the object step's constants",
+    "validate": "leave-one-dataset-out validation of the object step's constants",
     "real_scenes": "the pipeline (and baselines) scored on named development scenes",
     "video": "a disparity sequence, each frame's SOM warm-started",
     "synth": "generated stereo frames (GT + SGBM) into the cache (docs/synth.md)",
