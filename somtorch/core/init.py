@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import torch
 
-from ..config.options import INITS
+from ..config.options import INITS  # noqa: F401  (re-exported: core.som and the tests read it here)
 
 
 def init_random(x: torch.Tensor, k: int, generator: torch.Generator,

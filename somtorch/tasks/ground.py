@@ -45,7 +45,6 @@ import numpy as np
 import torch
 
 from ..config import GroundConfig
-from ..config.options import GROUND_RULES as RULES
 from ..core.plane_counts import plane_band, plane_counts, surface_band
 from ..validation import check_tensor
 from .support_surface import own_band, own_surface, plane_fit, surface_map

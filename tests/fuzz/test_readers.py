@@ -18,7 +18,6 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from safetensors.torch import save_file
 
 import somtorch.disparity.headers as headers
 from somtorch import SOM
