@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from . import viz
 from .atomic import atomic_path
@@ -197,8 +198,42 @@ def write_point_clouds(scene: Scene, result: PipelineResult, out_dir: Path, *, m
                 reduced, out_dir / "cloud_reduced.png", backend=render_backend, view="oblique",
                 unit=cam.baseline_unit, title=f"{scene.name}: reduced point cloud, {len(reduced):,} points "
                                               "(framed on the 2-98 % range of x, y and depth)")
+    info["objects"] = object_extents(scene, result, member)
+    for i, o in enumerate(info["objects"]):
+        if o is not None:
+            x, y, z = o["size_xyz"]
+            above = "" if o["height_above_plane"] is None else f", {o['height_above_plane']:.3g} above the ground plane"
+            log.info("scene %s: kept area %d: %.3g x %.3g x %.3g %s (x, y, z), centre at depth %.3g%s", scene.name, i,
+                     x, y, z, cam.baseline_unit, o["centroid_xyz"][2], above)
     info["seconds"] = time.perf_counter() - t0
     return info
+
+
+def object_extents(scene: Scene, result: PipelineResult, member: int = 0) -> list[dict[str, Any] | None]:
+    """Where each kept area of ``member`` is in 3-D and how large it is
+    (:func:`~somtorch.geometry.object_extent`, in the camera's baseline unit): the valid pixels of
+    its segments inside its box, and its height above the ground plane where one was cut (a plane:
+    a bent support surface has none, ``height_above_plane`` null). One entry per kept area, None for
+    an area with no pixel of finite depth; [] without a camera."""
+    from .geometry import object_extent
+    from .tasks.objects import label_mask
+
+    cam = scene.camera
+    if cam is None:
+        return []
+    g = result.ground
+    plane = (g.a, g.b, g.c) if g is not None and not any(g.bend) else None
+    labels = result.labels[member]
+    out: list[dict[str, Any] | None] = []
+    for a in result.members[member].kept:
+        x0, y0, x1, y1 = a.box
+        inside = torch.zeros_like(scene.valid)
+        inside[y0:y1 + 1, x0:x1 + 1] = True
+        mask = label_mask(labels, a.neurons) & scene.valid & inside
+        ext = object_extent(scene.disparity, mask, focal_px=cam.focal_px, cx=cam.cx, cy=cam.cy,
+                            baseline=cam.baseline, doffs=cam.doffs, plane=plane)
+        out.append(None if ext is None else {**ext.as_dict(), "unit": cam.baseline_unit})
+    return out
 
 
 class SequenceWriter:

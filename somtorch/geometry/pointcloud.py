@@ -51,20 +51,23 @@ def _check_number(name: str, value: Any) -> float:
     return float(value)
 
 
-def _check_map_pair(name: str, x: torch.Tensor, valid: Any, *, ndim: tuple[int, ...]) -> None:
-    """Check a float map ``x`` and its boolean ``valid`` mask of the same shape; ``x`` finite where valid."""
+def _check_map_pair(name: str, x: torch.Tensor, valid: Any, *, ndim: tuple[int, ...],
+                    mask_name: str = "valid") -> None:
+    """Check a float map ``x`` and its boolean mask ``valid`` (called ``mask_name`` in the messages) of
+    the same shape; ``x`` finite where the mask is set."""
     check_tensor(name, x, ndim=ndim, floating=True)
-    check_tensor("valid", valid, ndim=ndim, dtype=torch.bool)
+    check_tensor(mask_name, valid, ndim=ndim, dtype=torch.bool)
     if valid.shape != x.shape:
-        raise ValueError(f"valid must have the shape of {name}: {name} has shape {tuple(x.shape)}, "
-                         f"valid has shape {tuple(valid.shape)}")
+        raise ValueError(f"{mask_name} must have the shape of {name}: {name} has shape {tuple(x.shape)}, "
+                         f"{mask_name} has shape {tuple(valid.shape)}")
     if valid.device != x.device:
-        raise ValueError(f"valid is on {valid.device} but {name} is on {x.device}; move one with .to(...)")
+        raise ValueError(f"{mask_name} is on {valid.device} but {name} is on {x.device}; move one with .to(...)")
     bad = valid & ~torch.isfinite(x)
     if bool(bad.any()):
         first = tuple(int(i) for i in bad.nonzero()[0])
-        raise ValueError(f"{name} is NaN or inf at {int(bad.sum())} pixel(s) marked valid, first at {first}; "
-                         "mark such pixels invalid in `valid`")
+        where, fix = (("marked valid", "mark such pixels invalid in `valid`") if mask_name == "valid" else
+                      (f"of {mask_name}", f"leave such pixels out of `{mask_name}`"))
+        raise ValueError(f"{name} is NaN or inf at {int(bad.sum())} pixel(s) {where}, first at {first}; {fix}")
 
 
 def _check_mask(name: str, mask: Any, hw: tuple[int, int], ref: str) -> torch.Tensor:

@@ -27,6 +27,7 @@ from pathlib import Path
 import torch
 
 from somtorch._optional import import_open3d
+from somtorch.geometry.extent import ROBUST_PERCENTILES
 from somtorch.geometry.ply import _atomic_output
 from somtorch.geometry.pointcloud import PointCloud
 from somtorch.validation import check_choice, check_positive, check_positive_int
@@ -130,7 +131,7 @@ def open3d_rendering_available() -> tuple[bool, str]:
 def render_point_cloud(cloud: PointCloud, path: str | os.PathLike[str], *, width: int = 800,
                        height: int = 600, backend: str = "auto", point_size: float = 2.0,
                        view: str = "front", unit: str | None = None, title: str | None = None,
-                       frame_percentiles: tuple[float, float] | None = (2.0, 98.0)) -> str:
+                       frame_percentiles: tuple[float, float] | None = ROBUST_PERCENTILES) -> str:
     """Render a cloud to a PNG file (written atomically) and return the backend that drew it.
 
     Points without colours, or with grey ones (a mono camera's image), are coloured by depth (``z``,
