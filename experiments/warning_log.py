@@ -62,5 +62,5 @@ def warnings_to_file(path: Path, what: str) -> Iterator[None]:
         routed[0][1].close()
     n = _count(path) - before
     if n:
-        print(f"{what}: {n} warning(s) of the scored runs (maps kept whole, no object, strides adjusted) "
-              f"in {path}", file=sys.stderr, flush=True)
+        print(f"{what}: {n} warning(s) of the scored runs (maps kept whole, no object, maps that disagree, "
+              f"strides adjusted) in {path}", file=sys.stderr, flush=True)

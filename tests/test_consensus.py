@@ -188,3 +188,30 @@ def test_maps_held_as_int16_give_the_same_runs_as_int64_maps(scene, maps):
     for a, b in zip(runs_s, runs_w, strict=True):
         assert [x.box for x in a.kept] == [x.box for x in b.kept] and a.consensus_map == b.consensus_map
         assert torch.equal(a.reduction.mask, b.reduction.mask) and a.score == b.score
+
+
+def test_a_run_whose_maps_disagree_is_flagged(scene, runs, caplog):
+    """A member whose kept map shares less than half its pixels with its other maps (``agreement`` under
+    ``LOW_AGREEMENT``) gets a warning line naming it; inside ``fallback_summary`` it is counted for the
+    one line at the end. Members of the real consensus run, their agreement set on either side."""
+    import logging
+
+    from somtorch.fallbacks import LOW_AGREEMENT, fallback_summary, warn_fallbacks
+
+    result, _ = runs
+    members = [replace(m, agreement=LOW_AGREEMENT - 0.2 if e in (1, 3) else LOW_AGREEMENT)
+               for e, m in enumerate(result.members)]
+    with caplog.at_level(logging.WARNING, logger="somtorch.pipeline"):
+        warn_fallbacks(scene.name, members)
+        lines = [r.getMessage() for r in caplog.records if "disagree" in r.getMessage()]
+        assert lines == [f"scene {scene.name}: member(s) [1, 3]: the run's maps disagree on what to keep "
+                         f"(agreement under {LOW_AGREEMENT:g}): its answer depends on the seed"]
+        caplog.clear()
+        warn_fallbacks(scene.name, [replace(m, agreement=None) for m in members])  # one map a run: no reading
+        assert not any("disagree" in r.getMessage() for r in caplog.records)
+        caplog.clear()
+        with fallback_summary(scene.name) as counts:
+            warn_fallbacks(scene.name, members)
+            warn_fallbacks(scene.name, members[:2])
+    assert counts[2:] == [E + 2, 3]
+    assert len(caplog.records) == 1 and "3 with maps that disagree" in caplog.records[0].getMessage()

@@ -28,8 +28,8 @@ def test_the_runs_warnings_go_to_the_file_and_one_line_counts_them(tmp_path, cap
     assert all(f"scene {w}:" in text for w in ("here0", "here2", "worker0", "worker3"))
     assert "after" not in text and "left out" not in text
     err = capsys.readouterr().err
-    assert err.splitlines() == [f"validate: 7 warning(s) of the scored runs (maps kept whole, no object, strides "
-                                f"adjusted) in {path}"]
+    assert err.splitlines() == [f"validate: 7 warning(s) of the scored runs (maps kept whole, no object, maps that "
+                                f"disagree, strides adjusted) in {path}"]
     seen = [r.getMessage() for r in caplog.records]
     assert "a frame left out" in seen and any("after" in m for m in seen)
     assert not any("here" in m for m in seen)
