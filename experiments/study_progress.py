@@ -46,7 +46,9 @@ JOB_S = 1.5
 def job_estimate(composed: DictConfig) -> tuple[float, int]:
     """``(seconds, peak bytes)`` of one job from its composed config (without the ``hydra`` node):
     :func:`somtorch.pipeline.resource_estimate` of its scene, times its runs and repeats. Raises
-    when the config or the scene cannot be read (the caller leaves the job out of the estimate)."""
+    when the config or the scene cannot be read (the caller leaves the job out of the estimate), and
+    ``JobRefused`` (``hydra_plugins.somtorch_launcher._workers``) where no run of the job can be
+    scored (:func:`experiments.study.unscorable`): the launcher refuses the sweep then."""
     import dataclasses
 
     from .run import load_input
@@ -64,6 +66,13 @@ def job_estimate(composed: DictConfig) -> tuple[float, int]:
         if len(_scenes) >= SCENES_KEPT:  # a big map is not held for the whole sweep
             _scenes.pop(next(iter(_scenes)))
         _scenes[key] = scene
+    from hydra_plugins.somtorch_launcher._workers import JobRefused
+
+    from .study import unscorable
+
+    why = unscorable(_scenes[key], getattr(cfg, "object_id", None))
+    if why is not None:  # no run of it can be scored: the sweep is refused before any job runs
+        raise JobRefused(why)
     separate = getattr(cfg, "execution", "ensemble") == "separate" and cfg.runs > 1
     repeats = getattr(cfg, "repeats", 1)
     one = dataclasses.replace(cfg, ensemble=1) if separate else cfg
@@ -74,24 +83,44 @@ def job_estimate(composed: DictConfig) -> tuple[float, int]:
 
 def estimate_jobs(config: DictConfig, jobs: list[list[str]]) -> tuple[float, int, int]:
     """``(seconds, largest peak bytes, jobs estimated)`` of the sweep's jobs; a job whose config
-    or scene cannot be read is left out (it fails with its own message when its turn comes)."""
+    or scene cannot be read is left out (it fails with its own message when its turn comes); a job
+    no run of which can be scored refuses the sweep in one line, exit status 2, before any runs."""
     from hydra.core.global_hydra import GlobalHydra
+
+    from hydra_plugins.somtorch_launcher._workers import JobRefused
 
     loader = GlobalHydra.instance().config_loader()
     seconds, peak, done = 0.0, 0, 0
-    for job in jobs:
+    refused = []
+    for i, job in enumerate(jobs):
         try:
             composed = loader.load_sweep_config(config, list(job))
             with open_dict(composed):
                 del composed["hydra"]  # its ${hydra:...} values need a running job
             s, p = job_estimate(composed)
+        except JobRefused as e:  # an input no run can use
+            refused.append((i, job, str(e)))
+            continue
         except Exception as e:  # noqa: BLE001 - an estimate must never stop the sweep
             log.debug("no estimate for job %s: %s", job, e)
             continue
         seconds += s
         peak = max(peak, p)
         done += 1
+    _refuse(refused)
     return seconds, peak, done
+
+
+def _refuse(refused: list[tuple[int, list[str], str]]) -> None:
+    """End the sweep in one line, exit status 2, where any job was refused (before any job runs)."""
+    from hydra_plugins.somtorch_launcher._workers import refused_too
+
+    if refused:
+        i, job, why = refused[0]
+        more = refused_too([n for n, _, _ in refused[1:]])
+        print(f"error: job #{i} ({' '.join(job)}): {why}{more}; no job of the sweep was run", file=sys.stderr,
+              flush=True)
+        raise SystemExit(2)
 
 
 def refuse_bad_jobs(config: DictConfig, jobs: list[list[str]]) -> None:
@@ -109,12 +138,7 @@ def refuse_bad_jobs(config: DictConfig, jobs: list[list[str]]) -> None:
             why = None
         if why is not None:
             refused.append((i, job, why))
-    if refused:
-        i, job, why = refused[0]
-        more = f"; {len(refused) - 1} more job(s) refused too" if len(refused) > 1 else ""
-        print(f"error: job #{i} ({' '.join(job)}): {why}{more}; no job of the sweep was run", file=sys.stderr,
-              flush=True)
-        raise SystemExit(2)
+    _refuse(refused)
 
 
 class StudyProgress(Callback):

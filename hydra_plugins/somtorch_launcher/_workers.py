@@ -75,8 +75,24 @@ def locate(path: Optional[str]) -> Optional[Callable[[DictConfig], Any]]:
         return None
 
 
+def refused_too(nums: Sequence[int]) -> str:
+    """The tail of a refused sweep's error line for the jobs refused after the first (numbers, the
+    first ten): a user who edits the sweep finds them all at once."""
+    if not nums:
+        return ""
+    shown = ", ".join(f"#{n}" for n in nums[:10]) + (", ..." if len(nums) > 10 else "")
+    return f"; {len(nums)} more job(s) refused too ({shown})"
+
+
+class JobRefused(Exception):
+    """Raised by a sweep's estimate function for a job whose input no run of it can use (its message:
+    one line naming the input and the problem): the launcher refuses the whole sweep before any job
+    runs, as for a bad config (:func:`config_error`), instead of the job failing in its turn."""
+
+
 def estimate(fn: Optional[Callable[[DictConfig], Any]], cfg: DictConfig) -> Optional[tuple[float, int]]:
-    """``fn``'s (seconds, peak bytes) for one composed job, or None (an estimate never stops a sweep)."""
+    """``fn``'s (seconds, peak bytes) for one composed job, or None (an estimate never stops a sweep:
+    only a :class:`JobRefused` it raises goes through)."""
     if fn is None:
         return None
     job = cfg.copy()
@@ -84,6 +100,8 @@ def estimate(fn: Optional[Callable[[DictConfig], Any]], cfg: DictConfig) -> Opti
         del job["hydra"]  # its ${hydra:...} values need a running job
     try:
         est = fn(job)
+    except JobRefused:
+        raise
     except Exception as e:  # noqa: BLE001 - the job fails with its own message when its turn comes
         log.debug("no estimate for job %s: %s", cfg.hydra.job.num, e)
         return None
@@ -122,13 +140,19 @@ def plan_jobs(loader: Any, master: DictConfig, items: Sequence[tuple[int, Sequen
               estimate_path: Optional[str]
               ) -> list[tuple[int, DictConfig, Optional[tuple[float, int]], Optional[str]]]:
     """Compose, check and estimate the jobs ``items`` = [(idx, overrides)]: [(idx, config,
-    estimate, why the config is refused or None)]."""
+    estimate, why the job is refused or None)] — its config (:func:`config_error`), or its input
+    (the estimate raised :class:`JobRefused`)."""
     fn = locate(estimate_path)
     out = []
     for idx, overrides in items:
         cfg = compose(loader, master, idx, overrides)
-        error = config_error(cfg)
-        out.append((idx, cfg, None if error else estimate(fn, cfg), error))
+        error, est = config_error(cfg), None
+        if error is None:
+            try:
+                est = estimate(fn, cfg)
+            except JobRefused as e:  # an input no run can use: refused like a bad config
+                error = str(e)
+        out.append((idx, cfg, est, error))
     return out
 
 

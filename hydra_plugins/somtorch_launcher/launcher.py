@@ -51,7 +51,7 @@ from hydra.plugins.launcher import Launcher
 from hydra.types import HydraContext, TaskFunction
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from ._workers import ENV_PROGRESS, Pool, plan_jobs
+from ._workers import ENV_PROGRESS, Pool, plan_jobs, refused_too
 
 log = logging.getLogger(__name__)
 
@@ -177,7 +177,7 @@ class SomtorchLauncher(Launcher):
             refused = [(cfg, why) for _, cfg, _, why in planned if why is not None]
             if refused:  # one bad job refuses the sweep before any job runs
                 cfg, why = refused[0]
-                more = f"; {len(refused) - 1} more job(s) refused too" if len(refused) > 1 else ""
+                more = refused_too([c.hydra.job.num for c, _ in refused[1:]])
                 print(f"error: job #{cfg.hydra.job.num} ({' '.join(filter_overrides(cfg.hydra.overrides.task))}): "
                       f"{why}{more}; no job of the sweep was run", file=sys.stderr, flush=True)
                 raise SystemExit(2)

@@ -105,7 +105,8 @@ def test_a_hostile_table1_sweep_is_refused_before_any_job_runs(tmp_path, bad):
     assert len(errors) == 1 and "Traceback" not in p.stderr, p.stderr
     why = "train.lr=nan: expected a finite number" if bad == "yaml" else "objects.map_stride must be an integer"
     assert errors[0].startswith("error: job #0 (") and why in errors[0], errors
-    assert "31 more job(s) refused too; no job of the sweep was run" in errors[0]
+    assert "31 more job(s) refused too (#1, #2, #3, #4, #5, #6, #7, #8, #9, #10, ...); no job of the sweep was run" \
+        in errors[0]
     sweep = tmp_path / "out" / "studies" / "table1"
     assert not [d for d in sweep.iterdir() if d.is_dir()] if sweep.exists() else True  # no job folder
 
@@ -120,3 +121,32 @@ def test_a_bad_job_refuses_a_basic_launcher_sweep_before_any_job_runs(tmp_path):
     assert errors[0].startswith("error: job #1 (") and "train.epochs must be an integer" in errors[0], errors
     assert "no job of the sweep was run" in errors[0]
     assert not list(tmp_path.glob("studies/l/*/metrics.json")) and not list(tmp_path.glob("studies/l/*/FAILED"))
+
+
+@pytest.mark.parametrize("launcher", ["somtorch", "basic"])
+def test_a_sweep_with_a_frame_no_run_can_score_is_refused_before_any_job_runs(tmp_path, launcher):
+    """A generated SGBM frame may leave its main object without one valid pixel (garden frames of the
+    Table 1 family): a study of it is refused in one line naming the job and the scene, before any
+    job runs, instead of the job failing minutes into the sweep. Two labelled frames on disk, the
+    second with its main object's disparity removed (``inf``: invalid in a PFM); the somtorch launcher
+    and, through the study's callback, Hydra's basic one."""
+    from dataclasses import replace as dc_replace
+
+    from somtorch.synth.frame import generate_frame
+    from somtorch.synth.store import write_frame
+
+    frame = generate_frame("floor", 0, "oakd", sgbm=False)
+    good = write_frame(frame, tmp_path / "good")
+    gap = frame.disparity.clone()
+    gap[frame.objects == 1] = float("inf")
+    write_frame(dc_replace(frame, disparity=gap), tmp_path / "gap")
+    p = _cli("--multirun", "data=file", f"data.source={good},{tmp_path / 'gap'}", "ensemble=1",
+             f"paths.output_dir={tmp_path / 'out'}", "study=unscorable", f"hydra/launcher={launcher}",
+             module="study")
+    assert p.returncode == 2, p.stderr
+    errors = [line for line in p.stderr.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1 and "Traceback" not in p.stderr, p.stderr
+    assert errors[0].startswith("error: job #1 (") and "scene 'gap': the main object has no pixel with a valid " \
+        "disparity, so no run of it can be scored" in errors[0] and "no job of the sweep was run" in errors[0], errors
+    sweep = tmp_path / "out" / "studies" / "unscorable"
+    assert not [d for d in sweep.iterdir() if d.is_dir()] if sweep.exists() else True  # no job folder
