@@ -117,7 +117,7 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     from somtorch import interrupt
     from somtorch.atomic import commit_staged, write_json
     from somtorch.outputs import summarize, write_maps, write_point_clouds
-    from somtorch.pipeline import run_pipeline
+    from somtorch.pipeline import run_pipeline, unscorable
 
     t_start = time.perf_counter()
     out_t: dict[str, float] = {}  # seconds spent writing each kind of output
@@ -133,6 +133,10 @@ def execute(cfg: RunConfig, out_dir: Path, config_dict: dict | None = None) -> d
     t_load = time.perf_counter() - t_start
     if cfg.object_id is not None and scene.objects is None:
         raise ValueError(f"object_id={cfg.object_id} but scene {scene.name!r} has no object mask")
+    why = unscorable(scene, cfg.object_id)
+    if why is not None:  # the reduction needs no labels: reduce it, unscored
+        log.warning("%s; the runs are not scored", why)
+        scene = dataclasses.replace(scene, objects=None, object_info=[])
     what = f"scene {scene.name} ({scene.width}x{scene.height}, ensemble={cfg.runs})"
     log.info("%s: estimated %s", what, check_resources([(scene, cfg, 1)], cfg.resources, what).describe())
     out_dir.mkdir(parents=True, exist_ok=True)

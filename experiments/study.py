@@ -49,6 +49,7 @@ from .run import CONF_DIR, load_input
 from .schema import RunConfig, register
 from .metrics_schema import SCHEMA, config_hash, files_digest
 from somtorch.evaluation import merge_runs, per_object_scores, run_records, summarize_runs
+from somtorch.pipeline import unscorable
 
 log = logging.getLogger("somtorch.study")
 register()
@@ -132,21 +133,6 @@ def code_digest() -> str:
     return _CODE_DIGEST[str(root)]
 
 
-def unscorable(scene: Any, object_id: Optional[int] = None) -> Optional[str]:
-    """Why no run of a job on ``scene`` can be scored, in one line, or None: the scene has an object
-    mask, and the object it is scored against (``object_id``; None: the main object) has no pixel
-    with a valid disparity (a matcher leaves a textureless object without any). Read by the job
-    before any work and by the sweep's estimate, which refuses the sweep before any job runs."""
-    if scene.objects is None:
-        return None
-    mask = scene.scored_mask(object_id)
-    if mask is not None and bool((mask & scene.valid).any()):
-        return None
-    what = "the main object" if object_id is None else f"object {object_id}"
-    return (f"scene {scene.name!r}: {what} has no pixel with a valid disparity, so no run of it can be scored; "
-            "leave this job out of the sweep")
-
-
 def job_hash(cfg: StudyConfig, config: dict[str, Any]) -> str:
     """The job's hash: of ``config`` and of the library's code (:func:`code_digest`), and for a
     trained task baseline also of the model it scores (its registry entry's ``identity``), so that a
@@ -202,7 +188,7 @@ def _execute(cfg: StudyConfig, out_dir: Path, config: dict[str, Any]) -> dict[st
         obj_mask = scene.scored_mask(cfg.object_id)
         why = unscorable(scene, cfg.object_id)
         if why is not None:
-            raise ValueError(why)
+            raise ValueError(f"{why}; leave this job out of the sweep")
     if cfg.task_baseline is not None:  # one deterministic run, no training
         from somtorch.atomic import write_staged
 

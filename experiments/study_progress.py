@@ -48,7 +48,7 @@ def job_estimate(composed: DictConfig) -> tuple[float, int]:
     :func:`somtorch.pipeline.resource_estimate` of its scene, times its runs and repeats. Raises
     when the config or the scene cannot be read (the caller leaves the job out of the estimate), and
     ``JobRefused`` (``hydra_plugins.somtorch_launcher._workers``) where no run of the job can be
-    scored (:func:`experiments.study.unscorable`): the launcher refuses the sweep then."""
+    scored (:func:`somtorch.pipeline.unscorable`): the launcher refuses the sweep then."""
     import dataclasses
 
     from .run import load_input
@@ -68,11 +68,11 @@ def job_estimate(composed: DictConfig) -> tuple[float, int]:
         _scenes[key] = scene
     from hydra_plugins.somtorch_launcher._workers import JobRefused
 
-    from .study import unscorable
+    from somtorch.pipeline import unscorable
 
     why = unscorable(_scenes[key], getattr(cfg, "object_id", None))
     if why is not None:  # no run of it can be scored: the sweep is refused before any job runs
-        raise JobRefused(why)
+        raise JobRefused(f"{why}; leave this job out of the sweep")
     separate = getattr(cfg, "execution", "ensemble") == "separate" and cfg.runs > 1
     repeats = getattr(cfg, "repeats", 1)
     one = dataclasses.replace(cfg, ensemble=1) if separate else cfg

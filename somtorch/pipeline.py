@@ -43,7 +43,7 @@ from .tasks.scoring import optimal_reduction, score_reduction
 __all__ = ["AreaConfig", "BaselineConfig", "FeatureConfig", "GroundConfig", "METHODS", "MemberResult",
            "ObjectSetup", "PipelineConfig", "PipelineResult", "ReductionConfig", "SOMConfig", "TrainConfig",
            "detect", "detect_runs", "map_stride", "object_setup", "run_pipeline", "segment_runs",
-           "train_stride"]
+           "train_stride", "unscorable"]
 DETERMINISTIC_METHODS = tuple(n for n, s in SEGMENTERS.items() if s.deterministic)
 log = logging.getLogger("somtorch.pipeline")
 
@@ -105,8 +105,26 @@ def read_map(scene: Scene, cfg: PipelineConfig) -> tuple[Scene, int, float | Non
             median_noise(sigma, k))
 
 
+def unscorable(scene: Scene, object_id: int | None = None) -> str | None:
+    """Why no run on ``scene`` can be scored, in one line, or None: the scene has an object mask, and
+    the object the runs are scored against (``object_id``; None: the main object) has no pixel with
+    a valid disparity (a matcher leaves a textureless object without any). :func:`prepare` refuses
+    such a scene before any work; ``somtorch-run`` reduces it unscored, ``somtorch-study`` refuses
+    the sweep."""
+    if scene.objects is None:
+        return None
+    mask = scene.scored_mask(object_id)
+    if mask is not None and bool((mask & scene.valid).any()):
+        return None
+    what = "the main object" if object_id is None else f"object {object_id}"
+    return f"scene {scene.name!r}: {what} has no pixel with a valid disparity, so no run of it can be scored"
+
+
 def check_usable(scene: Scene, cfg: PipelineConfig) -> None:
     """The degenerate-input checks of :func:`prepare` (see there)."""
+    why = unscorable(scene, cfg.object_id)
+    if why is not None:
+        raise ValueError(f"{why}; leave its labels out (Scene.objects None) to reduce it unscored")
     n = scene.n_valid
     need = _min_pixels(cfg)
     if n < need:
@@ -145,7 +163,8 @@ def prepare(scene: Scene, cfg: PipelineConfig, timer: _Timer | None = None, *,
     Raises:
         ValueError: before any work, for a map no segmentation can use: fewer valid pixels than
             the SOM has neurons (or than 16), or one disparity everywhere (a constant map — an
-            all-zero file usually means its invalid value was not declared).
+            all-zero file usually means its invalid value was not declared); and for a labelled
+            scene whose scored object has no valid pixel (:func:`unscorable`).
     """
     timer = timer or _Timer()
     check_usable(scene, cfg)

@@ -342,3 +342,29 @@ def test_quiet_prints_only_where_the_results_are_and_keeps_the_log(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout == f"outputs in {tmp_path / 'run'}\n" and proc.stderr == ""
     assert "outputs in" in (tmp_path / "run" / "run.log").read_text()
+
+
+def test_a_labelled_frame_whose_object_has_no_valid_pixel_is_reduced_unscored(tmp_path):
+    """A generated frame whose main object has no valid disparity (a matcher leaves a textureless
+    object without any): the run reduces it, says in one warning why it is not scored, and writes
+    metrics.json without a score; the library refuses it before any work."""
+    from dataclasses import replace as dc_replace
+
+    from somtorch.disparity import load_scene
+    from somtorch.pipeline import PipelineConfig, run_pipeline
+    from somtorch.synth.frame import generate_frame
+    from somtorch.synth.store import write_frame
+
+    frame = generate_frame("floor", 0, "oakd", sgbm=False)
+    gap = frame.disparity.clone()
+    gap[frame.objects == 1] = float("inf")
+    folder = write_frame(dc_replace(frame, disparity=gap), tmp_path / "gap")
+    p = _run(tmp_path / "run", "data=file", f"data.source={folder}", "ensemble=2")
+    _ok(p)
+    assert "scene 'gap': the main object has no pixel with a valid disparity, so no run of it can be scored; " \
+        "the runs are not scored" in p.stderr + p.stdout
+    metrics = _strict_json(tmp_path / "run" / "metrics.json")
+    assert all(m["score"] is None for m in metrics["members"]) and "summary" not in metrics
+    assert metrics["members"][0]["reduction_union"] > 0  # reduced all the same
+    with pytest.raises(ValueError, match="scene 'gap': the main object has no pixel with a valid disparity"):
+        run_pipeline(load_scene(folder), PipelineConfig(ensemble=1))
