@@ -287,7 +287,8 @@ def transformed(caches: list[SceneCache], kind: str, baselines: list[str] | None
     as the original; a pole in front of the object is a failure class), not a tuning scene: the
     folds never see it. Scenes already resampled are skipped by a resampling transform; ``sgbm:NAME``
     matches each frame's stereo pair again (:func:`~experiments.scenes.rematched`, pairs under
-    ``data_dir`` or in the corpus) and skips the frames whose map is not SGBM's."""
+    ``data_dir`` or in the corpus) and skips the frames whose map is not SGBM's; a transformed frame
+    whose object has no valid pixel left is skipped with a warning."""
     from .scenes import add_junk, rematched
     from .validate_baselines import baseline_counts
 
@@ -302,6 +303,9 @@ def transformed(caches: list[SceneCache], kind: str, baselines: list[str] | None
                 continue
         else:
             scene = add_junk(c.scene, kind, seed=sum(map(ord, c.spec.name)))
+        if not scorable(scene):  # the transform took every valid pixel of its object: nothing to score
+            log.warning("%s (%s): the main object has no valid pixel left; not scored", c.spec.name, kind)
+            continue
         tc = SceneCache(c.spec, scene, c.base)
         out[c.spec.name] = sc = tc.score({})
         sc["baselines"] = baseline_counts(scene, baselines, reduction, c.spec.camera) if baselines else {}

@@ -201,12 +201,18 @@ def write_point_clouds(scene: Scene, result: PipelineResult, out_dir: Path, *, m
     info["objects"] = object_extents(scene, result, member)
     for i, o in enumerate(info["objects"]):
         if o is not None:
-            x, y, z = o["size_xyz"]
-            above = "" if o["height_above_plane"] is None else f", {o['height_above_plane']:.3g} above the ground plane"
-            log.info("scene %s: kept area %d: %.3g x %.3g x %.3g %s (x, y, z), centre at depth %.3g%s", scene.name, i,
-                     x, y, z, cam.baseline_unit, o["centroid_xyz"][2], above)
+            size = " x ".join(_length(v) for v in o["size_xyz"])
+            h = o["height_above_plane"]
+            above = "" if h is None else f", {_length(h)} above the ground plane"
+            log.info("scene %s: kept area %d: %s %s (x, y, z), its centre at a depth of %s%s", scene.name, i, size,
+                     cam.baseline_unit, _length(o["centroid_xyz"][2]), above)
     info["seconds"] = time.perf_counter() - t0
     return info
+
+
+def _length(v: float) -> str:
+    """A length for a log line: three significant digits, whole units from 1000 on (millimetres)."""
+    return f"{v:.0f}" if abs(v) >= 1000 else f"{v:.3g}"
 
 
 def object_extents(scene: Scene, result: PipelineResult, member: int = 0) -> list[dict[str, Any] | None]:

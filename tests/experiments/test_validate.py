@@ -704,3 +704,29 @@ def test_a_fresh_clone_is_told_the_command_that_generates_the_missing_frames(tmp
             assert fam in cfg.families and cam in cfg.cameras and int(s.folder.split("/")[1]) < cfg.n
     assert missing_corpus(specs) is None
     assert missing_corpus(frames(datasets=["kitti2015"])) is None  # real frames never need it
+
+
+def test_a_transform_that_leaves_the_object_no_valid_pixel_skips_the_frame(caplog):
+    """A robustness transform may take every valid pixel of a frame's object (``quantize:1`` rounds
+    a far object's 0.4 px to 0, no measurement): that frame is skipped with a warning naming it, the
+    others are scored, and the probe goes on (it used to stop the whole validate run)."""
+    import logging
+
+    import torch
+
+    from experiments.datasets import FrameSpec
+    from experiments.validate import transformed
+    from somtorch.disparity.scene import scene_from_arrays
+
+    caches = []
+    for name, obj_d in (("far", 0.4), ("near", 40.0)):
+        d = torch.full((96, 128), 20.0)
+        objects = torch.zeros(96, 128, dtype=torch.long)
+        d[30:60, 30:70], objects[30:60, 30:70] = obj_d, 1
+        scene = scene_from_arrays(d, torch.ones(96, 128, dtype=torch.bool), objects=objects, name=name)
+        caches.append(SceneCache(FrameSpec(name=name, dataset="t", real=False, folder="."), scene,
+                                 PipelineConfig(ensemble=2), ceilings=False))
+    with caplog.at_level(logging.WARNING, logger="somtorch.validate"):
+        got = transformed(caches, "quantize:1")
+    assert list(got) == ["near"] and got["near"]["runs"] == 2
+    assert any("far (quantize:1): the main object has no valid pixel left" in r.getMessage() for r in caplog.records)
